@@ -1,0 +1,11 @@
+"""PIRL: prompt-informed reinforcement learning for UAV visual coverage path planning.
+
+``import pirl`` registers the Gymnasium environment ``pirl/VCPP-v0``.
+"""
+
+import gymnasium as _gym
+
+__version__ = "0.1.0"
+
+if "pirl/VCPP-v0" not in _gym.registry:
+    _gym.register(id="pirl/VCPP-v0", entry_point="pirl.env.vcpp_env:VCPPEnv")

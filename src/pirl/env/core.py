@@ -1,0 +1,87 @@
+"""The environment logic shared by the single and the batched environment.
+
+:class:`EnvCore` couples a :class:`~pirl.world.state.WorldBatch` with reward weights and the
+observation builder. ``VCPPEnv`` is an ``EnvCore`` of one world, ``VCPPVecEnv`` one of N, so
+both follow the same rules by construction.
+"""
+
+from __future__ import annotations
+
+from itertools import repeat
+from typing import Any
+
+import numpy as np
+
+from pirl.env.info import InfoSnapshot, LazyInfo
+from pirl.env.observation import build_observations, build_observations_parallel, obs_size
+from pirl.env.rewards import draw_weights, weighted_rewards
+from pirl.world import dynamics as D
+from pirl.world.config import REWARD_TERMS, VCPPConfig
+from pirl.world.metrics import episode_metrics
+from pirl.world.state import Scenario, WorldBatch
+
+
+class EnvCore:
+    """N worlds plus their reward weights, observations and per-step info."""
+
+    def __init__(self, cfg: VCPPConfig, num: int) -> None:
+        self.cfg = cfg
+        self.num = num
+        self.world = WorldBatch(cfg, num)
+        self.weights = np.zeros((num, len(REWARD_TERMS)), dtype=np.float64)
+        self.rewards = np.zeros(num, dtype=np.float64)
+        self.obs = np.zeros((num, obs_size(cfg.obs_window, cfg.obs_global)), dtype=np.float32)
+        self._all = np.arange(num, dtype=np.int64)
+
+    def reset_world(
+        self, e: int, rng: np.random.Generator, scenario: Scenario | None = None
+    ) -> None:
+        """New episode in world ``e``: scenario (drawn from ``rng`` unless given), weights."""
+        if scenario is None:
+            self.world.reset_world(e, rng)
+        else:
+            self.world.load_scenario(e, scenario)
+        self.weights[e] = draw_weights(self.cfg, rng)
+        self.rewards[e] = 0.0
+        self._observe(np.array([e], dtype=np.int64))
+
+    def step(self, actions: np.ndarray) -> None:
+        """One action per world; afterwards read ``obs``, ``rewards`` and ``world.flags``."""
+        actions = np.asarray(actions, dtype=np.int64).reshape(self.num)
+        if actions.min() < 0 or actions.max() >= D.N_ACTIONS:
+            raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
+        self.world.step(actions)
+        weighted_rewards(self.world.terms, self.weights, self.rewards)
+        self._observe(self._all)
+
+    def _observe(self, worlds: np.ndarray) -> None:
+        w = self.world
+        kernel = (
+            build_observations_parallel if w.parallel and len(worlds) > 1 else build_observations
+        )
+        kernel(
+            worlds, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
+            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
+        )  # fmt: skip
+
+    @property
+    def terminated(self) -> np.ndarray:
+        return self.world.flags[:, D.F_TERMINATED].astype(bool)
+
+    @property
+    def truncated(self) -> np.ndarray:
+        return self.world.flags[:, D.F_TRUNCATED].astype(bool)
+
+    def infos(self, worlds: list[int] | None = None, lazy: bool = False) -> list[dict[str, Any]]:
+        """The ``info`` dict of each world (all by default), as of the last step or reset.
+
+        With ``lazy`` the dicts are :class:`~pirl.env.info.LazyInfo` (filled on first read).
+        """
+        w = self.world
+        idx = range(self.num) if worlds is None else worlds
+        done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
+        metrics = {int(e): episode_metrics(w, int(e)) for e in done}
+        snap = InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
+        if lazy:
+            return list(map(LazyInfo, repeat(snap), idx))
+        return [snap.info(e) for e in idx]

@@ -1,0 +1,157 @@
+"""Per-step ``info`` dicts, built lazily for the batched environment.
+
+Building 64 nested dicts per step would cost more than stepping the worlds, and most steps
+nobody reads them (Stable-Baselines3 only looks up ``episode`` and ``terminal_observation``).
+So each step takes a cheap snapshot of the state arrays, and each world's info is a
+:class:`LazyInfo`: a real ``dict`` whose VCPP keys are filled from the snapshot the first time
+any of them is read. Keys set by others (``terminal_observation``, ``episode``) work as usual.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pirl.world import dynamics as D
+from pirl.world.config import REWARD_TERMS
+
+INFO_KEYS = frozenset(
+    {
+        "reward_terms",
+        "reward_weights",
+        "new_cells",
+        "covered",
+        "coverable",
+        "battery",
+        "collision",
+        "redundant",
+        "idle",
+        "wind",
+        "position",
+        "camera",
+        "steps",
+        "episode_metrics",
+    }
+)
+
+
+class InfoSnapshot:
+    """Copies of the arrays an info is made of, at one step."""
+
+    __slots__ = ("ints", "terms", "weights", "flags", "energy", "capacity", "metrics")
+
+    def __init__(
+        self,
+        ints: np.ndarray,
+        terms: np.ndarray,
+        weights: np.ndarray,
+        flags: np.ndarray,
+        energy: np.ndarray,
+        capacity: float,
+        metrics: dict[int, dict[str, float]],
+    ) -> None:
+        self.ints, self.terms, self.weights = ints.copy(), terms.copy(), weights.copy()
+        self.flags, self.energy = flags.copy(), energy.copy()
+        self.capacity = capacity
+        self.metrics = metrics
+
+    def info(self, e: int) -> dict[str, Any]:
+        """The full info dict of world ``e``."""
+        r = self.ints[e].tolist()
+        f = self.flags[e].tolist()
+        info = {
+            "reward_terms": dict(zip(REWARD_TERMS, self.terms[e].tolist(), strict=True)),
+            "reward_weights": dict(zip(REWARD_TERMS, self.weights[e].tolist(), strict=True)),
+            "new_cells": f[D.F_NEW],
+            "covered": r[D.COVERED],
+            "coverable": r[D.COVERABLE],
+            "battery": max(0.0, float(self.energy[e]) / self.capacity),
+            "collision": bool(f[D.F_COLLISION]),
+            "redundant": bool(f[D.F_REDUNDANT]),
+            "idle": bool(f[D.F_IDLE]),
+            "wind": bool(f[D.F_WIND]),
+            "position": (r[D.PX], r[D.PY], r[D.PZ]),
+            "camera": (r[D.TILT], r[D.PAN], r[D.ZOOM] / 10.0),
+            "steps": r[D.STEPS],
+        }
+        if e in self.metrics:
+            info["episode_metrics"] = self.metrics[e]
+        return info
+
+
+class LazyInfo(dict):
+    """A dict whose VCPP keys appear on first read. ``dict(info)`` gives a plain dict."""
+
+    __slots__ = ("_snap", "_e")
+
+    def __init__(self, snap: InfoSnapshot, e: int) -> None:
+        # dict.__new__ already made an empty dict; skipping dict.__init__ halves the cost.
+        self._snap: InfoSnapshot | None = snap
+        self._e = e
+
+    def _fill(self) -> None:
+        snap = self._snap
+        if snap is not None:
+            self._snap = None
+            for key, value in snap.info(self._e).items():
+                dict.setdefault(self, key, value)
+
+    def __getitem__(self, key: Any) -> Any:
+        if key in INFO_KEYS:
+            self._fill()
+        return dict.__getitem__(self, key)
+
+    def get(self, key: Any, default: Any = None) -> Any:
+        if key in INFO_KEYS:
+            self._fill()
+        return dict.get(self, key, default)
+
+    def __contains__(self, key: object) -> bool:
+        if key in INFO_KEYS:
+            self._fill()
+        return dict.__contains__(self, key)
+
+    def __iter__(self):
+        self._fill()
+        return dict.__iter__(self)
+
+    def __len__(self) -> int:
+        self._fill()
+        return dict.__len__(self)
+
+    def keys(self):
+        self._fill()
+        return dict.keys(self)
+
+    def values(self):
+        self._fill()
+        return dict.values(self)
+
+    def items(self):
+        self._fill()
+        return dict.items(self)
+
+    def pop(self, key: Any, *default: Any) -> Any:
+        if key in INFO_KEYS:
+            self._fill()
+        return dict.pop(self, key, *default)
+
+    def copy(self) -> dict[str, Any]:
+        self._fill()
+        return dict(dict.items(self))
+
+    def __eq__(self, other: object) -> bool:
+        self._fill()
+        if isinstance(other, LazyInfo):
+            other._fill()
+        return dict.__eq__(self, other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        self._fill()
+        return dict.__repr__(self)
+
+    def __reduce__(self):
+        return (dict, (self.copy(),))

@@ -1,0 +1,130 @@
+"""The batched VCPP environment: N worlds stepped at once, as a Stable-Baselines3 VecEnv."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from pirl.env.core import EnvCore
+from pirl.env.observation import obs_size
+from pirl.env.render import render_world
+from pirl.env.vcpp_env import resolve_config
+from pirl.world import dynamics as D
+from pirl.world.config import VCPPConfig
+
+
+class VCPPVecEnv(VecEnv):
+    """N VCPP worlds on batched numpy arrays (see :class:`pirl.env.vcpp_env.VCPPEnv`).
+
+    World ``i`` seeded with ``s`` behaves exactly like a single ``VCPPEnv`` reset with seed
+    ``s``: same observations, rewards, dones and infos. Auto-reset follows Stable-Baselines3:
+    when a world ends, ``infos[i]["terminal_observation"]`` holds its last observation,
+    ``infos[i]["TimeLimit.truncated"]`` tells truncation, and the returned observation is the
+    first one of the next episode.
+    """
+
+    def __init__(
+        self,
+        num_envs: int,
+        config: VCPPConfig | Mapping[str, Any] | None = None,
+        **settings: Any,
+    ) -> None:
+        self.cfg = resolve_config(config, settings)
+        self.core = EnvCore(self.cfg, num_envs)
+        n = obs_size(self.cfg.obs_window, self.cfg.obs_global)
+        self.render_mode = "rgb_array"
+        super().__init__(
+            num_envs,
+            spaces.Box(0.0, 1.0, (n,), dtype=np.float32),
+            spaces.Discrete(D.N_ACTIONS),
+        )
+        self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
+        self._actions: np.ndarray | None = None
+
+    @property
+    def world(self):
+        """The underlying :class:`~pirl.world.state.WorldBatch`."""
+        return self.core.world
+
+    def reset(self) -> np.ndarray:
+        for e in range(self.num_envs):
+            if self._seeds[e] is not None:
+                self._rngs[e] = seeding.np_random(self._seeds[e])[0]
+            self.core.reset_world(e, self._rngs[e])
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = self.core.infos()
+        return self.core.obs.copy()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions, dtype=np.int64).reshape(self.num_envs)
+
+    def step_wait(self):
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        core = self.core
+        core.step(self._actions)
+        self._actions = None
+        terminated, truncated = core.terminated, core.truncated
+        dones = terminated | truncated
+        rewards = core.rewards.astype(np.float32)
+        infos = core.infos(lazy=True)
+        obs = core.obs.copy()
+        for e in np.flatnonzero(dones):
+            infos[e]["terminal_observation"] = obs[e].copy()
+            infos[e]["TimeLimit.truncated"] = bool(truncated[e] and not terminated[e])
+            core.reset_world(int(e), self._rngs[e])
+            obs[e] = core.obs[e]
+            self.reset_infos[e] = core.infos([int(e)])[0]
+        return obs, rewards, dones, infos
+
+    def close(self) -> None:
+        return None
+
+    # -- VecEnv plumbing: every world shares one object, so attributes are the vec env's ----
+    def _indices_list(self, indices: VecEnvIndices) -> list[int]:
+        return list(self._get_indices(indices))
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self, attr_name) for _ in self._indices_list(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        method = getattr(self, method_name)
+        return [method(*method_args, **method_kwargs) for _ in self._indices_list(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._indices_list(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [
+            render_world(self.world, e, None, self.cfg.render_cell_px) for e in range(self.num_envs)
+        ]
+
+
+def make_vec_env(
+    num_envs: int,
+    seed: int | None = 0,
+    config: VCPPConfig | Mapping[str, Any] | None = None,
+    **settings: Any,
+) -> VCPPVecEnv:
+    """A batched VCPP environment whose world ``i`` is seeded with ``seed + i`` at first reset.
+
+    Takes the same keyword settings as ``gymnasium.make("pirl/VCPP-v0", ...)``.
+    """
+    venv = VCPPVecEnv(num_envs, config, **settings)
+    if seed is not None:
+        venv.seed(seed)
+    return venv
+
+
+__all__ = ["VCPPVecEnv", "make_vec_env"]

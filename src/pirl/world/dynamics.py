@@ -1,0 +1,217 @@
+"""The rules of the grid world, compiled with numba and applied to a batch of worlds.
+
+A single environment is a batch of one: the single and batched environments call the same
+kernels, so they cannot disagree. Per-world integer state lives in one table ``ints`` whose
+columns are named below; per-world bookkeeping grids have the batch as first axis.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from pirl.world.footprint import footprint_cells
+
+# Columns of the per-world integer table.
+PX, PY, PZ, TILT, PAN, ZOOM = 0, 1, 2, 3, 4, 5
+STEPS, COVERED, COVERABLE, RED_CELLS, MULTI_CELLS, VIEWS = 6, 7, 8, 9, 10, 11
+COLLISIONS, RED_STEPS, CAM_ACTIONS, N_OBS, FOOT_SUM, WIND_PUSHES = 12, 13, 14, 15, 16, 17
+N_INT_COLS = 18
+
+# Columns of the per-step flag table.
+F_COLLISION, F_REDUNDANT, F_IDLE, F_TERMINATED, F_TRUNCATED, F_WIND, F_NEW = 0, 1, 2, 3, 4, 5, 6
+N_FLAG_COLS = 7
+
+# Reward term columns, in the order of pirl.world.config.REWARD_TERMS.
+T_COVERAGE, T_REDUNDANT, T_BATTERY, T_CAM, T_CURIOSITY, T_COLLISION, T_IDLE, T_LLM = range(8)
+N_TERMS = 8
+
+# Scalar parameters passed to the kernels (floats and ints, see WorldBatch.params).
+PF_FOV, PF_RANGE, PF_WIND, PF_E_MOVE, PF_E_CLIMB, PF_E_DESCEND, PF_E_CAM, PF_E_HOVER = range(8)
+PF_MAX_FP = 8
+N_PF = 9
+PI_MODEL, PI_OCCLUSION, PI_X, PI_Y, PI_Z, PI_STEP_LIMIT = range(6)
+N_PI = 6
+
+# Action deltas in the paper's order: x+, x-, y+, y-, z+, z-, tilt+5, tilt-5, pan+15, pan-15,
+# zoom+0.1, zoom-0.1.
+N_ACTIONS = 12
+ACTION_NAMES = (
+    "x+", "x-", "y+", "y-", "z+", "z-", "tilt+5", "tilt-5", "pan+15", "pan-15", "zoom+0.1",
+    "zoom-0.1",
+)  # fmt: skip
+MOVES = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64
+)
+WIND_DIRS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=np.int64)
+
+
+@numba.njit(cache=True, inline="always")
+def _next_uniform(rng, e):
+    """splitmix64: a small counter-based generator per world, so wind is reproducible."""
+    state = rng[e] + np.uint64(0x9E3779B97F4A7C15)
+    rng[e] = state
+    z = state
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _free(blocked, e, x, y, z, sx, sy, sz):
+    return 0 <= x < sx and 0 <= y < sy and 0 <= z < sz and not blocked[e, x, y, z]
+
+
+@numba.njit(cache=True)
+def observe(
+    e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf, mark_redundant
+):
+    """Look from world e's current pose; update coverage bookkeeping; return new cells.
+
+    With ``mark_redundant``, a view that adds nothing marks its cells as redundantly viewed
+    (the set C_redundant of the RVC metric).
+    """
+    n = footprint_cells(
+        pi[PI_MODEL], ints[e, PX], ints[e, PY], ints[e, PZ], ints[e, TILT], ints[e, PAN],
+        ints[e, ZOOM], pi[PI_X], pi[PI_Y], pf[PF_FOV], pf[PF_RANGE], pi[PI_OCCLUSION] != 0,
+        obstacles[e], ints[e, N_OBS], buf,
+    )  # fmt: skip
+    new = 0
+    seen = 0
+    for k in range(n):
+        i, j = buf[k, 0], buf[k, 1]
+        if not coverable[e, i, j]:
+            continue
+        seen += 1
+        v = views[e, i, j]
+        if v == 0:
+            new += 1
+            blk_todo[e, bx[i], by[j]] -= 1
+        elif v == 1:
+            ints[e, MULTI_CELLS] += 1
+        views[e, i, j] = v + 1
+    ints[e, COVERED] += new
+    ints[e, VIEWS] += seen
+    ints[e, FOOT_SUM] += n
+    if new == 0 and mark_redundant:
+        for k in range(n):
+            i, j = buf[k, 0], buf[k, 1]
+            if coverable[e, i, j] and not redmask[e, i, j]:
+                redmask[e, i, j] = True
+                ints[e, RED_CELLS] += 1
+    return new
+
+
+@numba.njit(cache=True)
+def _step_one(
+    e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
+    obstacles, pf, pi, buf, terms, flags,
+):  # fmt: skip
+    """Apply world e's action; fill its ``terms`` (raw reward terms) and ``flags``."""
+    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
+    a = actions[e]
+    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
+    tilt, pan, zoom = ints[e, TILT], ints[e, PAN], ints[e, ZOOM]
+    collision = False
+    if a < 6:
+        nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
+        if _free(blocked, e, nx, ny, nz, sx, sy, sz):
+            ints[e, PX], ints[e, PY], ints[e, PZ] = nx, ny, nz
+        else:
+            collision = True
+        if a < 4:
+            used = pf[PF_E_MOVE]
+        elif a == 4:
+            used = pf[PF_E_CLIMB]
+        else:
+            used = pf[PF_E_DESCEND]
+    else:
+        used = pf[PF_E_CAM]
+        ints[e, CAM_ACTIONS] += 1
+        if a == 6:
+            ints[e, TILT] = min(90, tilt + 5)
+        elif a == 7:
+            ints[e, TILT] = max(0, tilt - 5)
+        elif a == 8:
+            ints[e, PAN] = min(90, pan + 15)
+        elif a == 9:
+            ints[e, PAN] = max(-90, pan - 15)
+        elif a == 10:
+            ints[e, ZOOM] = min(20, zoom + 1)
+        else:
+            ints[e, ZOOM] = max(5, zoom - 1)
+    used += pf[PF_E_HOVER]
+
+    wind = False
+    if pf[PF_WIND] > 0.0 and _next_uniform(rng, e) < pf[PF_WIND]:
+        d = min(3, int(_next_uniform(rng, e) * 4.0))
+        wx, wy = ints[e, PX] + WIND_DIRS[d, 0], ints[e, PY] + WIND_DIRS[d, 1]
+        if _free(blocked, e, wx, wy, ints[e, PZ], sx, sy, sz):
+            ints[e, PX], ints[e, PY] = wx, wy
+            wind = True
+            ints[e, WIND_PUSHES] += 1
+
+    moved = ints[e, PX] != x or ints[e, PY] != y or ints[e, PZ] != z
+    cam_changed = ints[e, TILT] != tilt or ints[e, PAN] != pan or ints[e, ZOOM] != zoom
+    new = observe(
+        e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf[e], True
+    )
+    curiosity = 0.0
+    if moved:
+        cx, cy, cz = ints[e, PX], ints[e, PY], ints[e, PZ]
+        visits[e, cx, cy, cz] += 1
+        curiosity = 1.0 / np.sqrt(visits[e, cx, cy, cz])
+    redundant = new == 0
+    idle = not moved and not cam_changed and not collision
+
+    energy[e] -= used
+    ints[e, STEPS] += 1
+    if collision:
+        ints[e, COLLISIONS] += 1
+    if redundant:
+        ints[e, RED_STEPS] += 1
+
+    terms[e, T_COVERAGE] = new / pf[PF_MAX_FP]
+    terms[e, T_REDUNDANT] = 1.0 if redundant else 0.0
+    terms[e, T_BATTERY] = used / pf[PF_E_MOVE]
+    terms[e, T_CAM] = 1.0 if (a >= 6 and new > 0) else 0.0
+    terms[e, T_CURIOSITY] = curiosity
+    terms[e, T_COLLISION] = 1.0 if collision else 0.0
+    terms[e, T_IDLE] = 1.0 if idle else 0.0
+    terms[e, T_LLM] = 0.0
+
+    terminated = energy[e] <= 0.0 or ints[e, COVERED] >= ints[e, COVERABLE]
+    flags[e, F_COLLISION] = collision
+    flags[e, F_REDUNDANT] = redundant
+    flags[e, F_IDLE] = idle
+    flags[e, F_TERMINATED] = terminated
+    flags[e, F_TRUNCATED] = (not terminated) and ints[e, STEPS] >= pi[PI_STEP_LIMIT]
+    flags[e, F_WIND] = wind
+    flags[e, F_NEW] = new
+
+
+@numba.njit(cache=True)
+def step_worlds(
+    actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
+    obstacles, pf, pi, buf, terms, flags,
+):  # fmt: skip
+    """Apply one action to every world, one after the other."""
+    for e in range(actions.shape[0]):
+        _step_one(
+            e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
+            bx, by, obstacles, pf, pi, buf, terms, flags,
+        )  # fmt: skip
+
+
+@numba.njit(cache=True, parallel=True)
+def step_worlds_parallel(
+    actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
+    obstacles, pf, pi, buf, terms, flags,
+):  # fmt: skip
+    """Apply one action to every world, worlds spread over threads (same results)."""
+    for e in numba.prange(actions.shape[0]):
+        _step_one(
+            e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
+            bx, by, obstacles, pf, pi, buf, terms, flags,
+        )  # fmt: skip

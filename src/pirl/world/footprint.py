@@ -1,0 +1,164 @@
+"""Camera footprint models: which ground cells a camera pose sees.
+
+Both models are numba-compiled functions that write the seen cells into a caller's buffer,
+so the single and batched environments, the renderer and the planners use the same geometry.
+
+- ``paper``: a square centred on the UAV, half-width ``floor(m * zoom + 0.5)`` with ``m = 2``
+  when tilt < 80 degrees and ``m = 1`` otherwise (altitude and pan do not matter).
+- ``frustum``: a pinhole camera at the cell centre, ``z + 1`` cells above the ground, the four
+  corner rays intersected with the ground (cut at ``max_range``), optional occlusion by spheres.
+
+Coordinates: cell ``(x, y, z)`` has its centre at ``(x, y, z)``; the ground plane lies at
+``z = -1`` so a UAV in level ``z`` flies ``z + 1`` cells above it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+PAPER = 0
+FRUSTUM = 1
+# A square of half-width 4 (zoom 2.0, tilt < 80) is the largest paper footprint.
+PAPER_MAX_HALF = 4
+
+
+@numba.njit(cache=True, inline="always")
+def paper_half_width(tilt: int, zoom10: int) -> int:
+    """Half-width of the paper model's square: floor(m * zoom + 0.5) in integer arithmetic."""
+    m = 2 if tilt < 80 else 1
+    return (m * zoom10 + 5) // 10
+
+
+@numba.njit(cache=True)
+def _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, out):
+    """Write the 4 ground corners (out[4, 2]) of the frustum, in cell coordinates."""
+    t = math.radians(tilt)
+    p = math.radians(pan)
+    height = z + 1.0
+    th = math.tan(math.radians(fov_deg) / 2.0) / (zoom10 / 10.0)
+    tv = th * 0.75
+    fx, fy, fz = math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)
+    rx, ry = math.sin(p), -math.cos(p)
+    ux, uy, uz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
+    # Corner order walks around the rectangle so the polygon is simple.
+    sxs = (1.0, 1.0, -1.0, -1.0)
+    sys_ = (1.0, -1.0, -1.0, 1.0)
+    for k in range(4):
+        dx = fx + th * sxs[k] * rx + tv * sys_[k] * ux
+        dy = fy + th * sxs[k] * ry + tv * sys_[k] * uy
+        dz = fz + tv * sys_[k] * uz
+        horiz = math.sqrt(dx * dx + dy * dy)
+        if dz < -1e-9:
+            s = height / -dz
+            gx, gy = dx * s, dy * s
+            if gx * gx + gy * gy > max_range * max_range:
+                gx, gy = dx / horiz * max_range, dy / horiz * max_range
+        elif horiz > 1e-12:
+            gx, gy = dx / horiz * max_range, dy / horiz * max_range
+        else:
+            gx, gy = 0.0, 0.0
+        out[k, 0] = x + gx
+        out[k, 1] = y + gy
+
+
+@numba.njit(cache=True)
+def _inside(px, py, poly):
+    """Crossing-number point-in-polygon test (any simple polygon)."""
+    inside = False
+    n = poly.shape[0]
+    j = n - 1
+    for i in range(n):
+        xi, yi = poly[i, 0], poly[i, 1]
+        xj, yj = poly[j, 0], poly[j, 1]
+        if (yi > py) != (yj > py):
+            xc = xi + (py - yi) * (xj - xi) / (yj - yi)
+            if px < xc:
+                inside = not inside
+        j = i
+    return inside
+
+
+@numba.njit(cache=True)
+def _occluded(cx, cy, cz, gx, gy, obstacles, n_obs):
+    """True when the segment camera -> ground cell centre crosses an obstacle sphere."""
+    gz = -1.0
+    dx, dy, dz = gx - cx, gy - cy, gz - cz
+    seg2 = dx * dx + dy * dy + dz * dz
+    for k in range(n_obs):
+        ox, oy, oz, r = obstacles[k, 0], obstacles[k, 1], obstacles[k, 2], obstacles[k, 3]
+        t = ((ox - cx) * dx + (oy - cy) * dy + (oz - cz) * dz) / seg2
+        t = min(1.0, max(0.0, t))
+        qx, qy, qz = cx + t * dx - ox, cy + t * dy - oy, cz + t * dz - oz
+        if qx * qx + qy * qy + qz * qz <= r * r:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def footprint_cells(
+    model, x, y, z, tilt, pan, zoom10, size_x, size_y, fov_deg, max_range, occlusion,
+    obstacles, n_obs, out,
+):  # fmt: skip
+    """Write the seen ground cells as rows (i, j) of ``out`` and return their count.
+
+    ``out`` must hold at least :func:`max_footprint_cells` rows.
+    """
+    n = 0
+    if model == PAPER:
+        h = paper_half_width(tilt, zoom10)
+        for i in range(max(0, x - h), min(size_x, x + h + 1)):
+            for j in range(max(0, y - h), min(size_y, y + h + 1)):
+                out[n, 0] = i
+                out[n, 1] = j
+                n += 1
+        return n
+    poly = np.empty((4, 2))
+    _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, poly)
+    x0 = max(0, int(math.floor(poly[:, 0].min())))
+    x1 = min(size_x - 1, int(math.ceil(poly[:, 0].max())))
+    y0 = max(0, int(math.floor(poly[:, 1].min())))
+    y1 = min(size_y - 1, int(math.ceil(poly[:, 1].max())))
+    for i in range(x0, x1 + 1):
+        for j in range(y0, y1 + 1):
+            if _inside(i, j, poly):
+                if occlusion and _occluded(x, y, z, i, j, obstacles, n_obs):
+                    continue
+                out[n, 0] = i
+                out[n, 1] = j
+                n += 1
+    return n
+
+
+def max_footprint_cells(model: int, size_z: int, fov_deg: float, max_range: float) -> int:
+    """Cells in the largest footprint any camera setting can produce on an unbounded ground.
+
+    This normalizes the coverage reward term dC into [0, 1].
+    """
+    if model == PAPER:
+        return (2 * PAPER_MAX_HALF + 1) ** 2
+    span = int(math.ceil(max_range)) + 2
+    side = 2 * span + 1
+    out = np.empty((side * side, 2), dtype=np.int64)
+    empty = np.zeros((0, 4))
+    best = 0
+    for z in range(size_z):
+        for tilt in range(0, 91, 5):
+            for pan in (0, 45):
+                for zoom10 in range(5, 21):
+                    n = footprint_cells(
+                        FRUSTUM, span, span, z, tilt, pan, zoom10, side, side,
+                        fov_deg, max_range, False, empty, 0, out,
+                    )  # fmt: skip
+                    best = max(best, n)
+    return best
+
+
+def buffer_rows(model: int, max_range: float) -> int:
+    """Rows a footprint buffer needs for this model."""
+    if model == PAPER:
+        return (2 * PAPER_MAX_HALF + 1) ** 2
+    side = 2 * (int(math.ceil(max_range)) + 2) + 1
+    return side * side
