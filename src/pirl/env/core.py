@@ -10,24 +10,61 @@ from __future__ import annotations
 from itertools import repeat
 from typing import Any
 
+import numba
 import numpy as np
 
 from pirl.env.info import InfoSnapshot, LazyInfo
-from pirl.env.observation import build_observations, build_observations_parallel, obs_size
-from pirl.env.rewards import draw_weights, weighted_rewards
+from pirl.env.observation import _observation, build_observations, obs_size
+from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
 from pirl.world.config import REWARD_TERMS, VCPPConfig
+from pirl.world.dynamics import PI_STEP_LIMIT, _step_one
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch
+
+
+def _make_step_kernel(parallel: bool):
+    """A kernel that steps every world, weighs its reward terms and builds its observation.
+
+    One fused loop (one thread launch, data still in cache) over the rules defined once in
+    :func:`pirl.world.dynamics._step_one` and :func:`pirl.env.observation._observation`.
+    """
+    loop = numba.prange if parallel else range
+
+    @numba.njit(cache=True, parallel=parallel)
+    def kernel(
+        actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
+        blk_total, bx, by, obstacles, pf, pi, buf, terms, flags, weights, rewards, capacity,
+        window, obs,
+    ):  # fmt: skip
+        for e in loop(actions.shape[0]):
+            _step_one(
+                e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits,
+                blk_todo, bx, by, obstacles, pf, pi, buf, terms, flags,
+            )  # fmt: skip
+            r = 0.0
+            for k in range(terms.shape[1]):
+                r += terms[e, k] * weights[e, k]
+            rewards[e] = r
+            _observation(
+                e, ints, energy, capacity, pi[PI_STEP_LIMIT], blocked, coverable, views,
+                blk_todo, blk_total, window, obs,
+            )  # fmt: skip
+
+    return kernel
+
+
+_step_serial = _make_step_kernel(False)
+_step_parallel = _make_step_kernel(True)
 
 
 class EnvCore:
     """N worlds plus their reward weights, observations and per-step info."""
 
-    def __init__(self, cfg: VCPPConfig, num: int) -> None:
+    def __init__(self, cfg: VCPPConfig, num: int, parallel: bool | None = None) -> None:
         self.cfg = cfg
         self.num = num
-        self.world = WorldBatch(cfg, num)
+        self.world = WorldBatch(cfg, num, parallel)
         self.weights = np.zeros((num, len(REWARD_TERMS)), dtype=np.float64)
         self.rewards = np.zeros(num, dtype=np.float64)
         self.obs = np.zeros((num, obs_size(cfg.obs_window, cfg.obs_global)), dtype=np.float32)
@@ -50,16 +87,18 @@ class EnvCore:
         actions = np.asarray(actions, dtype=np.int64).reshape(self.num)
         if actions.min() < 0 or actions.max() >= D.N_ACTIONS:
             raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
-        self.world.step(actions)
-        weighted_rewards(self.world.terms, self.weights, self.rewards)
-        self._observe(self._all)
+        w = self.world
+        kernel = _step_parallel if w.parallel else _step_serial
+        kernel(
+            actions, w.ints, w.energy, w.rng, w.blocked, w.coverable, w.views, w.redmask,
+            w.visits, w.blk_todo, w.blk_total, w.bx, w.by, w.obstacles, w.pf, w.pi, w.buf,
+            w.terms, w.flags, self.weights, self.rewards, w.capacity, self.cfg.obs_window,
+            self.obs,
+        )  # fmt: skip
 
     def _observe(self, worlds: np.ndarray) -> None:
         w = self.world
-        kernel = (
-            build_observations_parallel if w.parallel and len(worlds) > 1 else build_observations
-        )
-        kernel(
+        build_observations(
             worlds, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
             w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
         )  # fmt: skip

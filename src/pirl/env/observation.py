@@ -85,17 +85,4 @@ def build_observations(
         )  # fmt: skip
 
 
-@numba.njit(cache=True, parallel=True)
-def build_observations_parallel(
-    worlds, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
-    window, out,
-):  # fmt: skip
-    """As :func:`build_observations`, worlds spread over threads (same results)."""
-    for k in numba.prange(worlds.shape[0]):
-        _observation(
-            worlds[k], ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo,
-            blk_total, window, out,
-        )  # fmt: skip
-
-
-__all__ = ["N_SCALARS", "build_observations", "build_observations_parallel", "obs_size"]
+__all__ = ["N_SCALARS", "build_observations", "obs_size"]

@@ -6,7 +6,6 @@ decides how much each one counts (DESIGN.md section 4).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from pirl.world.config import REWARD_TERMS, VCPPConfig
@@ -28,13 +27,3 @@ def draw_weights(cfg: VCPPConfig, rng: np.random.Generator) -> np.ndarray:
     if not cfg.llm_weight:
         weights[LLM_INDEX] = 0.0
     return weights
-
-
-@numba.njit(cache=True)
-def weighted_rewards(terms, weights, out):
-    """out[e] = sum_k terms[e, k] * weights[e, k], summed in a fixed order per world."""
-    for e in range(terms.shape[0]):
-        r = 0.0
-        for k in range(terms.shape[1]):
-            r += terms[e, k] * weights[e, k]
-        out[e] = r

@@ -32,10 +32,11 @@ class VCPPVecEnv(VecEnv):
         self,
         num_envs: int,
         config: VCPPConfig | Mapping[str, Any] | None = None,
+        parallel: bool | None = None,
         **settings: Any,
     ) -> None:
         self.cfg = resolve_config(config, settings)
-        self.core = EnvCore(self.cfg, num_envs)
+        self.core = EnvCore(self.cfg, num_envs, parallel)
         n = obs_size(self.cfg.obs_window, self.cfg.obs_global)
         self.render_mode = "rgb_array"
         super().__init__(
@@ -75,12 +76,15 @@ class VCPPVecEnv(VecEnv):
         rewards = core.rewards.astype(np.float32)
         infos = core.infos(lazy=True)
         obs = core.obs.copy()
-        for e in np.flatnonzero(dones):
-            infos[e]["terminal_observation"] = obs[e].copy()
-            infos[e]["TimeLimit.truncated"] = bool(truncated[e] and not terminated[e])
-            core.reset_world(int(e), self._rngs[e])
-            obs[e] = core.obs[e]
-            self.reset_infos[e] = core.infos([int(e)])[0]
+        ended = np.flatnonzero(dones)
+        if ended.size:
+            for e in ended:
+                infos[e]["terminal_observation"] = obs[e].copy()
+                infos[e]["TimeLimit.truncated"] = bool(truncated[e] and not terminated[e])
+                core.reset_world(int(e), self._rngs[e])
+            obs[ended] = core.obs[ended]
+            for e, info in zip(ended, core.infos(ended.tolist(), lazy=True), strict=True):
+                self.reset_infos[e] = info
         return obs, rewards, dones, infos
 
     def close(self) -> None:
@@ -115,13 +119,15 @@ def make_vec_env(
     num_envs: int,
     seed: int | None = 0,
     config: VCPPConfig | Mapping[str, Any] | None = None,
+    parallel: bool | None = None,
     **settings: Any,
 ) -> VCPPVecEnv:
     """A batched VCPP environment whose world ``i`` is seeded with ``seed + i`` at first reset.
 
-    Takes the same keyword settings as ``gymnasium.make("pirl/VCPP-v0", ...)``.
+    Takes the same keyword settings as ``gymnasium.make("pirl/VCPP-v0", ...)``; ``parallel``
+    spreads worlds over numba threads (off by default; same results).
     """
-    venv = VCPPVecEnv(num_envs, config, **settings)
+    venv = VCPPVecEnv(num_envs, config, parallel, **settings)
     if seed is not None:
         venv.seed(seed)
     return venv

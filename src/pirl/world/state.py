@@ -18,7 +18,6 @@ from pirl.world.config import ConfigError, VCPPConfig
 from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells, max_footprint_cells
 
 _MAX_SCENARIO_TRIES = 200
-PARALLEL_MIN_WORLDS = 16
 
 
 @dataclass(frozen=True)
@@ -30,13 +29,23 @@ class Scenario:
     wind_seed: int
 
 
+@numba.njit(cache=True)
+def _fill_blocked(obstacles, out):
+    sx, sy, sz = out.shape
+    for k in range(obstacles.shape[0]):
+        cx, cy, cz, r = obstacles[k, 0], obstacles[k, 1], obstacles[k, 2], obstacles[k, 3]
+        # Only the sphere's bounding box can be blocked by it.
+        for i in range(max(0, int(np.floor(cx - r))), min(sx, int(np.ceil(cx + r)) + 1)):
+            for j in range(max(0, int(np.floor(cy - r))), min(sy, int(np.ceil(cy + r)) + 1)):
+                for m in range(max(0, int(np.floor(cz - r))), min(sz, int(np.ceil(cz + r)) + 1)):
+                    if (i - cx) ** 2 + (j - cy) ** 2 + (m - cz) ** 2 <= r * r:
+                        out[i, j, m] = True
+
+
 def blocked_grid(size: tuple[int, int, int], obstacles: np.ndarray) -> np.ndarray:
     """Cells whose centre lies within an obstacle sphere (distance <= radius)."""
-    sx, sy, sz = size
-    gx, gy, gz = np.meshgrid(np.arange(sx), np.arange(sy), np.arange(sz), indexing="ij")
-    blocked = np.zeros(size, dtype=bool)
-    for cx, cy, cz, r in obstacles:
-        blocked |= (gx - cx) ** 2 + (gy - cy) ** 2 + (gz - cz) ** 2 <= r * r
+    blocked = np.zeros(size, dtype=np.bool_)
+    _fill_blocked(np.asarray(obstacles, dtype=np.float64).reshape(-1, 4), blocked)
     return blocked
 
 
@@ -87,6 +96,10 @@ def _reset_bookkeeping(e, ints, views, redmask, visits, blk_todo, blk_total, cov
 class WorldBatch:
     """N grid worlds of one configuration, stepped together.
 
+    ``parallel`` spreads the worlds over numba threads; the results are the same either way.
+    It is off by default: on a small shared machine (2 cores, with training and an LLM busy) a
+    parallel step waits for its slowest thread and can be far slower than one thread.
+
     Public arrays (first axis = world): ``ints`` (see the column constants in
     :mod:`pirl.world.dynamics`), ``energy`` (units left), ``blocked`` (X, Y, Z), ``coverable``
     and ``views`` (X, Y; views = how many steps saw the cell), ``redmask`` (cells seen by a
@@ -94,7 +107,7 @@ class WorldBatch:
     :meth:`step`: ``terms`` (raw reward terms) and ``flags`` (per-step events).
     """
 
-    def __init__(self, cfg: VCPPConfig, num: int) -> None:
+    def __init__(self, cfg: VCPPConfig, num: int, parallel: bool | None = None) -> None:
         if num < 1:
             raise ConfigError(f"num_envs={num}: need at least 1 world")
         self.cfg = cfg
@@ -123,8 +136,7 @@ class WorldBatch:
         self.terms = np.zeros((num, D.N_TERMS), dtype=np.float64)
         self.flags = np.zeros((num, D.N_FLAG_COLS), dtype=np.int64)
         self.buf = np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64)
-        # Threads pay off only for larger batches; results are identical either way.
-        self.parallel = num >= PARALLEL_MIN_WORLDS
+        self.parallel = bool(parallel) and num > 1
 
         self.pf = np.zeros(D.N_PF, dtype=np.float64)
         self.pf[D.PF_FOV] = cfg.fov_deg

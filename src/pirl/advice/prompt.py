@@ -1,0 +1,209 @@
+"""The structured zero-shot prompt: task || environment summary || request template.
+
+The builder is deterministic and rounds every number (battery and coverage to ``decimals``,
+obstacle coordinates and radii to 1 decimal), so equal situations give byte-equal prompts and the
+advice cache can work. Two variants exist:
+
+- ``paper``: the paper's three parts in full sentences (DESIGN.md section 6).
+- ``compact``: the same items in terse form, about half the tokens, for small local models.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pirl.advice.recommendation import FORMAT_EXAMPLE, PAN_RANGE, TILT_RANGE, ZOOM_RANGE
+
+__all__ = ["VARIANTS", "FOOTPRINTS", "PromptState", "build_prompt", "paper_half_width"]
+
+VARIANTS: tuple[str, ...] = ("paper", "compact")
+"""Prompt variants :func:`build_prompt` knows."""
+FOOTPRINTS: tuple[str, ...] = ("paper", "frustum")
+"""Footprint models a prompt can describe."""
+
+FORMAT_TEMPLATE = "pan: <deg>, tilt: <deg>, zoom: <zoom>, X: <-1|0|1>, Y: <-1|0|1>, Z: <-1|0|1>"
+"""The answer format with placeholders."""
+
+
+@dataclass(frozen=True)
+class PromptState:
+    """What the prompt tells the advisor about the current step.
+
+    Attributes:
+        position: UAV cell ``(x, y, z)``.
+        tilt: camera tilt in degrees (0 = forward, 90 = straight down).
+        pan: camera pan in degrees (0 = +x, world frame).
+        zoom: camera zoom factor.
+        battery: battery left, normalized to [0, 1].
+        coverage: share of coverable ground cells seen so far, in [0, 1].
+        size: grid size ``(X, Y, Z)`` in cells.
+        footprint: active footprint model, ``"paper"`` or ``"frustum"``.
+        fov_deg: horizontal field of view at zoom 1, degrees.
+        resolution: image resolution, as text (the paper lists it among the camera parameters).
+        obstacles: spheres ``(cx, cy, cz, r)`` in cell units.
+        max_range: frustum model only: farthest ground distance seen, in cells.
+    """
+
+    position: tuple[int, int, int]
+    tilt: int
+    pan: int
+    zoom: float
+    battery: float
+    coverage: float
+    size: tuple[int, int, int]
+    footprint: str = "paper"
+    fov_deg: float = 90.0
+    resolution: str = "640x480"
+    obstacles: tuple[tuple[float, float, float, float], ...] = ()
+    max_range: float = 8.0
+
+    def __post_init__(self) -> None:
+        if self.footprint not in FOOTPRINTS:
+            raise ValueError(f"footprint must be one of {FOOTPRINTS}, got {self.footprint!r}")
+        if len(self.position) != 3 or len(self.size) != 3:
+            raise ValueError("position and size must have three components (x, y, z)")
+        if any(int(n) < 1 for n in self.size):
+            raise ValueError(f"size must be positive, got {self.size!r}")
+        for obstacle in self.obstacles:
+            if len(obstacle) != 4:
+                raise ValueError(f"an obstacle is (cx, cy, cz, r), got {obstacle!r}")
+        numbers = (self.zoom, self.battery, self.coverage, self.fov_deg, self.max_range)
+        if not all(math.isfinite(float(v)) for v in numbers):
+            raise ValueError("zoom, battery, coverage, fov_deg and max_range must be finite")
+        if not 0.0 < float(self.fov_deg) < 180.0:
+            raise ValueError(f"fov_deg must be in (0, 180), got {self.fov_deg!r}")
+        if float(self.zoom) <= 0.0:
+            raise ValueError(f"zoom must be positive, got {self.zoom!r}")
+
+
+def paper_half_width(tilt: float, zoom: float) -> int:
+    """Half-width of the paper footprint: ``floor(m * zoom + 0.5)``, m = 2 if tilt < 80 else 1."""
+    m = 2 if tilt < 80 else 1
+    return math.floor(m * zoom + 0.5)
+
+
+def _num(value: float, decimals: int) -> str:
+    """``value`` rounded to ``decimals`` places, fixed width, never ``-0``."""
+    v = round(float(value), decimals) + 0.0
+    return f"{v:.{decimals}f}"
+
+
+def _zoom(value: float) -> str:
+    """Zoom with 1 decimal, or 2 when needed (1.0, 1.25)."""
+    text = _num(value, 2)
+    return text[:-1] if text.endswith("0") else text
+
+
+def _obstacles(state: PromptState, compact: bool) -> str:
+    if not state.obstacles:
+        return "none"
+    items = []
+    for i, (cx, cy, cz, r) in enumerate(state.obstacles, start=1):
+        center = f"[{_num(cx, 1)}, {_num(cy, 1)}, {_num(cz, 1)}]"
+        items.append(
+            f"{center} r {_num(r, 1)}" if compact else f"{i}) {center} radius {_num(r, 1)}"
+        )
+    return "; ".join(items)
+
+
+def _view(state: PromptState, compact: bool) -> str:
+    """The view cone of the active footprint model, with its current value."""
+    if state.footprint == "paper":
+        h = paper_half_width(state.tilt, state.zoom)
+        side = 2 * h + 1
+        if compact:
+            return (
+                "square of ground cells under the drone, half-width floor(m*zoom+0.5), "
+                f"m=2 if tilt<80 else 1; now {h} ({side}x{side} cells)"
+            )
+        return (
+            "The camera sees a square of ground cells (z=0) centered below the drone. Its "
+            "half-width is floor(m*zoom+0.5) cells, with m=2 when tilt < 80 and m=1 otherwise; "
+            f"now {h}, so {side}x{side} cells. Altitude and pan do not change it."
+        )
+    altitude = int(state.position[2]) + 1
+    fov = math.degrees(2.0 * math.atan(math.tan(math.radians(state.fov_deg) / 2.0) / state.zoom))
+    if compact:
+        return (
+            f"pinhole camera {altitude} cells above ground, horizontal FOV "
+            f"2*atan(tan({_num(state.fov_deg, 0)}/2)/zoom) = {_num(fov, 0)} deg now, aspect 4:3, "
+            f"aimed by tilt and pan, max range {_num(state.max_range, 1)} cells"
+        )
+    return (
+        f"The camera is a pinhole at altitude z+1 = {altitude} cells above the ground. Its "
+        f"horizontal field of view is 2*atan(tan({_num(state.fov_deg, 0)}/2)/zoom) degrees "
+        f"({_num(fov, 0)} now; zooming in narrows it), aspect 4:3. Tilt is the angle below the "
+        "horizon (90 = straight down) and pan the heading (0 = +x). It sees the ground cells "
+        f"inside its view, up to {_num(state.max_range, 1)} cells away."
+    )
+
+
+def _ranges() -> str:
+    return (
+        f"pan [{PAN_RANGE[0]:g}, {PAN_RANGE[1]:g}] degrees, tilt [{TILT_RANGE[0]:g}, "
+        f"{TILT_RANGE[1]:g}] degrees, zoom [{ZOOM_RANGE[0]:g}, {ZOOM_RANGE[1]:g}], "
+        "X, Y, Z each -1, 0 or 1"
+    )
+
+
+def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) -> str:
+    """The prompt for ``state``: task, environment summary and request template.
+
+    Args:
+        state: the situation to describe.
+        variant: one of :data:`VARIANTS`.
+        decimals: decimals of battery and coverage (obstacles always use 1).
+
+    Raises:
+        ValueError: unknown variant, or negative ``decimals``.
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown prompt variant {variant!r}; allowed: {', '.join(VARIANTS)}")
+    if decimals < 0:
+        raise ValueError(f"decimals must be >= 0, got {decimals}")
+    compact = variant == "compact"
+    x, y, z = (int(v) for v in state.position)
+    sx, sy, sz = (int(v) for v in state.size)
+    camera = (
+        f"[{_num(state.fov_deg, 0)}, {state.resolution}, {int(state.tilt)}, {int(state.pan)}, "
+        f"{_zoom(state.zoom)}]"
+    )
+    battery = _num(min(max(state.battery, 0.0), 1.0), decimals)
+    coverage = _num(min(max(state.coverage, 0.0), 1.0), decimals)
+    if compact:
+        return (
+            "Task: steer a drone with a pan-tilt-zoom camera to see as much ground as possible, "
+            "avoiding obstacles, saving battery and not re-viewing seen cells.\n"
+            f"Grid: {sx}x{sy}x{sz} cells (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1}).\n"
+            f"Position [x, y, z]: [{x}, {y}, {z}]\n"
+            f"Camera [fov, resolution, tilt, pan, zoom]: {camera}\n"
+            f"Battery: {battery}. Coverage: {coverage}.\n"
+            f"View: {_view(state, compact=True)}.\n"
+            f"Obstacles (center, radius): {_obstacles(state, compact=True)}.\n"
+            f"Ranges: {_ranges()}.\n"
+            f"Answer one line: {FORMAT_TEMPLATE}\n"
+            f"Example: {FORMAT_EXAMPLE}"
+        )
+    n = len(state.obstacles)
+    return (
+        "[Task]\n"
+        "You control a drone that carries a gimbal camera with pan, tilt and zoom. Suggest its "
+        "next move and camera setting so that it sees as many ground cells as possible, while "
+        "avoiding obstacles, using little battery and not looking again at cells already seen.\n"
+        "\n[Environment]\n"
+        f"Grid: {sx} x {sy} x {sz} cells; x from 0 to {sx - 1}, y from 0 to {sy - 1}, "
+        f"z (altitude) from 0 to {sz - 1}. The ground is z=0.\n"
+        f"Drone position [x, y, z]: [{x}, {y}, {z}]\n"
+        f"Camera [field of view (deg), resolution, tilt (deg), pan (deg), zoom]: {camera}\n"
+        f"Battery: {battery} (1 = full, 0 = empty)\n"
+        f"Coverage: {coverage} (share of ground cells seen so far)\n"
+        f"View cone: {_view(state, compact=False)}\n"
+        f"Obstacles ({n} spheres, center [x, y, z] and radius): "
+        f"{_obstacles(state, compact=False)}\n"
+        "\n[Request]\n"
+        "Give a target pan, tilt and zoom, and a move of one cell or none along each axis "
+        f"(X, Y, Z). Ranges: {_ranges()}.\n"
+        f"Reply with exactly one line in this format: {FORMAT_TEMPLATE}\n"
+        f"For example: {FORMAT_EXAMPLE}"
+    )

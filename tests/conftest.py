@@ -1,0 +1,75 @@
+"""Shared fixtures for the world and environment tests.
+
+Most tests build small hand-made worlds: ``open_env(start, ...)`` gives a single environment
+(through ``gymnasium.make``) reset on a scenario with the given obstacles (none by default),
+start cell and wind seed, with wind off unless asked.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import pirl  # noqa: F401  (registers pirl/VCPP-v0)
+from pirl.world.state import Scenario
+
+EMPTY = np.zeros((0, 4))
+
+
+def scenario(
+    start: tuple[int, int, int],
+    obstacles: list[list[float]] | np.ndarray | None = None,
+    wind_seed: int = 0,
+) -> Scenario:
+    """A hand-made scenario; no obstacles unless given as rows (cx, cy, cz, r)."""
+    obs = EMPTY if obstacles is None else np.asarray(obstacles, dtype=np.float64).reshape(-1, 4)
+    return Scenario(obstacles=obs, start=start, wind_seed=wind_seed)
+
+
+@pytest.fixture
+def make_env() -> Callable[..., gym.Env]:
+    """Factory: ``make_env(size=..., **settings)`` -> gymnasium.make env (wind off by default)."""
+    envs: list[gym.Env] = []
+
+    def _make(size: tuple[int, int, int] = (5, 5, 3), **settings: Any) -> gym.Env:
+        settings.setdefault("wind_prob", 0.0)
+        env = gym.make("pirl/VCPP-v0", size=size, **settings)
+        envs.append(env)
+        return env
+
+    yield _make
+    for env in envs:
+        env.close()
+
+
+@pytest.fixture
+def open_env(make_env) -> Callable[..., tuple[gym.Env, np.ndarray, dict]]:
+    """Factory: ``open_env(start, size=..., obstacles=None, wind_seed=0, seed=0, **settings)``.
+
+    Returns (env, first observation, first info) of an env reset on a hand-made scenario.
+    """
+
+    def _open(
+        start: tuple[int, int, int],
+        size: tuple[int, int, int] = (5, 5, 3),
+        obstacles: list[list[float]] | None = None,
+        wind_seed: int = 0,
+        seed: int = 0,
+        **settings: Any,
+    ):
+        env = make_env(size=size, **settings)
+        obs, info = env.reset(
+            seed=seed, options={"scenario": scenario(start, obstacles, wind_seed)}
+        )
+        return env, obs, info
+
+    return _open
+
+
+def rel_cells(cells: np.ndarray, origin: tuple[int, int]) -> set[tuple[int, int]]:
+    """Footprint rows (i, j) as a set of offsets from ``origin``."""
+    return {(int(i) - origin[0], int(j) - origin[1]) for i, j in cells}
