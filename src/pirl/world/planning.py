@@ -1,0 +1,156 @@
+"""Geometric planning queries on one world: shortest free paths, useful views, best camera.
+
+Shared by the boustrophedon planner (a policy) and the oracle advisor (advice from geometry),
+so both read the map the same way. A :class:`WorldView` is one world's map and pose, either
+live (arrays shared with the batch, for a planner acting now) or a frozen copy (for advice
+computed later in another thread).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from pirl.world import dynamics as D
+from pirl.world.config import VCPPConfig
+from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells
+from pirl.world.state import WorldBatch
+
+Cell = tuple[int, int, int]
+Camera = tuple[int, int, int]  # tilt degrees, pan degrees, zoom tenths
+
+# Move deltas in action order (actions 0-5).
+MOVE_DELTAS: tuple[Cell, ...] = (
+    (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1),
+)  # fmt: skip
+
+
+@dataclass
+class WorldView:
+    """One world's map and pose. ``views`` counts how often each ground cell was seen."""
+
+    cfg: VCPPConfig
+    blocked: np.ndarray
+    coverable: np.ndarray
+    views: np.ndarray
+    obstacles: np.ndarray
+    position: Cell
+    camera: Camera
+    energy: float
+
+    @classmethod
+    def of(cls, world: WorldBatch, e: int, copy: bool = False) -> WorldView:
+        """World ``e``'s view: live arrays (``copy=False``) or a frozen snapshot."""
+        take = (lambda a: a.copy()) if copy else (lambda a: a)
+        row = world.ints[e]
+        return cls(
+            cfg=world.cfg,
+            blocked=take(world.blocked[e]),
+            coverable=take(world.coverable[e]),
+            views=take(world.views[e]),
+            obstacles=world.obstacle_list(e),
+            position=(int(row[D.PX]), int(row[D.PY]), int(row[D.PZ])),
+            camera=(int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])),
+            energy=float(world.energy[e]),
+        )
+
+    def footprint(self, pose: Cell, camera: Camera) -> np.ndarray:
+        """Ground cells (k, 2) seen from ``pose`` with ``camera``."""
+        cfg = self.cfg
+        model = PAPER if cfg.footprint == "paper" else FRUSTUM
+        buf = np.empty((buffer_rows(model, cfg.max_range), 2), dtype=np.int64)
+        n = footprint_cells(
+            model, int(pose[0]), int(pose[1]), int(pose[2]), int(camera[0]), int(camera[1]),
+            int(camera[2]), cfg.size[0], cfg.size[1], cfg.fov_deg, cfg.max_range,
+            cfg.occlusion, self.obstacles, len(self.obstacles), buf,
+        )  # fmt: skip
+        return buf[:n]
+
+    def useful(self, pose: Cell, camera: Camera) -> bool:
+        """Whether the view from ``pose`` would see a coverable cell not yet covered."""
+        fp = self.footprint(pose, camera)
+        if not len(fp):
+            return False
+        i, j = fp[:, 0], fp[:, 1]
+        return bool((self.coverable[i, j] & (self.views[i, j] == 0)).any())
+
+    def free(self, cell: Cell) -> bool:
+        sx, sy, sz = self.cfg.size
+        x, y, z = cell
+        return 0 <= x < sx and 0 <= y < sy and 0 <= z < sz and not self.blocked[x, y, z]
+
+    def neighbours(self, cell: Cell) -> Iterator[Cell]:
+        """Free cells one move away, in action order."""
+        x, y, z = cell
+        for dx, dy, dz in MOVE_DELTAS:
+            n = (x + dx, y + dy, z + dz)
+            if self.free(n):
+                yield n
+
+
+def _unwind(parent: dict[Cell, Cell | None], cell: Cell) -> list[Cell]:
+    path = [cell]
+    while parent[path[-1]] is not None:
+        path.append(parent[path[-1]])
+    return path[::-1]
+
+
+def bfs_path(view: WorldView, start: Cell, goal: Cell) -> list[Cell] | None:
+    """Shortest free path start -> goal (both included), or None when unreachable."""
+    if start == goal:
+        return [start]
+    parent: dict[Cell, Cell | None] = {start: None}
+    queue = deque([start])
+    while queue:
+        cell = queue.popleft()
+        for n in view.neighbours(cell):
+            if n in parent:
+                continue
+            parent[n] = cell
+            if n == goal:
+                return _unwind(parent, n)
+            queue.append(n)
+    return None
+
+
+def nearest(view: WorldView, start: Cell, accept: Callable[[Cell], bool]) -> list[Cell] | None:
+    """Shortest free path from ``start`` to the nearest other cell ``accept`` takes, or None."""
+    parent: dict[Cell, Cell | None] = {start: None}
+    queue = deque([start])
+    while queue:
+        cell = queue.popleft()
+        if cell != start and accept(cell):
+            return _unwind(parent, cell)
+        for n in view.neighbours(cell):
+            if n not in parent:
+                parent[n] = cell
+                queue.append(n)
+    return None
+
+
+def largest_footprint_camera(view: WorldView) -> tuple[Camera, int]:
+    """Camera (tilt, pan 0, zoom10) and altitude whose footprint is largest.
+
+    Ties go to the setting cheapest to reach from the current camera and altitude. Altitude is
+    searched only for the frustum model (it does not matter in the paper model).
+    """
+    cfg = view.cfg
+    sx, sy, sz = cfg.size
+    x, y, z = view.position
+    tilt0, pan0, zoom0 = view.camera
+    centre = (sx // 2, sy // 2)
+    altitudes = [z] if cfg.footprint == "paper" else range(sz)
+    best, best_key = ((tilt0, pan0, zoom0), z), None
+    for alt in altitudes:
+        for tilt in range(0, 91, 5):
+            for zoom10 in range(5, 21):
+                n = len(view.footprint((*centre, alt), (tilt, 0, zoom10)))
+                steps = abs(tilt - tilt0) // 5 + abs(zoom10 - zoom0) + abs(pan0) // 15
+                cost = steps * cfg.energy_camera + abs(alt - z) * cfg.energy_climb
+                key = (n, -cost)
+                if best_key is None or key > best_key:
+                    best, best_key = ((tilt, 0, zoom10), alt), key
+    return best
