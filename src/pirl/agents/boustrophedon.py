@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.policy import Policy
+from pirl.agents.policy import Policy, hold_action
 from pirl.world.planning import (
     MOVE_DELTAS,
     Cell,
@@ -106,8 +106,8 @@ class BoustrophedonPolicy(Policy):
                 self.path = self.path[1:]
                 return action
             self.target = None
-        # Nothing reachable is left to see: hold still with a camera action that changes nothing.
-        return _TILT_UP if view.camera[0] == 90 else _TILT_DOWN
+        # Nothing reachable is left to see: hold still.
+        return hold_action(view.camera)
 
     def _affordable(self, view: WorldView, path: list[Cell]) -> bool:
         legs = max(0, len(path) - 1)

@@ -44,3 +44,19 @@ class RandomPolicy(Policy):
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         return int(self._rng.integers(12))
+
+
+def hold_action(camera: tuple[int, int, int]) -> int:
+    """An action that changes nothing when one exists (a camera action at its limit).
+
+    ``camera`` is (tilt, pan, zoom10). With no camera axis at a limit it tilts down by 5, the
+    least disruptive change.
+    """
+    tilt, pan, zoom10 = camera
+    for at_limit, action in (
+        (tilt == 90, 6), (tilt == 0, 7), (pan == 90, 8), (pan == -90, 9), (zoom10 == 20, 10),
+        (zoom10 == 5, 11),
+    ):  # fmt: skip
+        if at_limit:
+            return action
+    return 6

@@ -121,6 +121,7 @@ class EnvCore:
         done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
         metrics = {int(e): episode_metrics(w, int(e)) for e in done}
         snap = InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
+        self.snapshot = snap
         if lazy:
             return list(map(LazyInfo, repeat(snap), idx))
         return [snap.info(e) for e in idx]

@@ -9,6 +9,7 @@ any of them is read. Keys set by others (``terminal_observation``, ``episode``) 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,7 @@ INFO_KEYS = frozenset(
 class InfoSnapshot:
     """Copies of the arrays an info is made of, at one step."""
 
-    __slots__ = ("ints", "terms", "weights", "flags", "energy", "capacity", "metrics")
+    __slots__ = ("ints", "terms", "weights", "flags", "energy", "capacity", "metrics", "extras")
 
     def __init__(
         self,
@@ -55,6 +56,8 @@ class InfoSnapshot:
         self.flags, self.energy = flags.copy(), energy.copy()
         self.capacity = capacity
         self.metrics = metrics
+        # Wrappers add their own lazily built keys here: key -> function of the world index.
+        self.extras: dict[str, Callable[[int], Any]] = {}
 
     def info(self, e: int) -> dict[str, Any]:
         """The full info dict of world ``e``."""
@@ -77,6 +80,8 @@ class InfoSnapshot:
         }
         if e in self.metrics:
             info["episode_metrics"] = self.metrics[e]
+        for key, build in self.extras.items():
+            info[key] = build(e)
         return info
 
 
@@ -90,6 +95,10 @@ class LazyInfo(dict):
         self._snap: InfoSnapshot | None = snap
         self._e = e
 
+    def _lazy(self, key: Any) -> bool:
+        snap = self._snap
+        return snap is not None and (key in INFO_KEYS or key in snap.extras)
+
     def _fill(self) -> None:
         snap = self._snap
         if snap is not None:
@@ -98,17 +107,17 @@ class LazyInfo(dict):
                 dict.setdefault(self, key, value)
 
     def __getitem__(self, key: Any) -> Any:
-        if key in INFO_KEYS:
+        if self._lazy(key):
             self._fill()
         return dict.__getitem__(self, key)
 
     def get(self, key: Any, default: Any = None) -> Any:
-        if key in INFO_KEYS:
+        if self._lazy(key):
             self._fill()
         return dict.get(self, key, default)
 
     def __contains__(self, key: object) -> bool:
-        if key in INFO_KEYS:
+        if self._lazy(key):
             self._fill()
         return dict.__contains__(self, key)
 
@@ -133,7 +142,7 @@ class LazyInfo(dict):
         return dict.items(self)
 
     def pop(self, key: Any, *default: Any) -> Any:
-        if key in INFO_KEYS:
+        if self._lazy(key):
             self._fill()
         return dict.pop(self, key, *default)
 

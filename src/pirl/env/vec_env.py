@@ -46,6 +46,7 @@ class VCPPVecEnv(VecEnv):
         )
         self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
         self._actions: np.ndarray | None = None
+        self.step_snapshot = None
 
     @property
     def world(self):
@@ -75,6 +76,8 @@ class VCPPVecEnv(VecEnv):
         dones = terminated | truncated
         rewards = core.rewards.astype(np.float32)
         infos = core.infos(lazy=True)
+        # The step's info snapshot, for wrappers that add terms (PARE writes the LLM term).
+        self.step_snapshot = core.snapshot
         obs = core.obs.copy()
         ended = np.flatnonzero(dones)
         if ended.size:

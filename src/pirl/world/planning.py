@@ -8,10 +8,12 @@ computed later in another thread).
 
 from __future__ import annotations
 
+import functools
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from pirl.world import dynamics as D
@@ -135,22 +137,58 @@ def largest_footprint_camera(view: WorldView) -> tuple[Camera, int]:
     """Camera (tilt, pan 0, zoom10) and altitude whose footprint is largest.
 
     Ties go to the setting cheapest to reach from the current camera and altitude. Altitude is
-    searched only for the frustum model (it does not matter in the paper model).
+    searched only for the frustum model (it does not matter in the paper model). Obstacles are
+    ignored: the choice is about the camera, not about one scene.
     """
-    cfg = view.cfg
+    return _largest_footprint_camera(view.cfg, view.position[2], tuple(view.camera))
+
+
+@functools.lru_cache(maxsize=4096)
+def _largest_footprint_camera(cfg: VCPPConfig, z: int, camera: Camera) -> tuple[Camera, int]:
     sx, sy, sz = cfg.size
-    x, y, z = view.position
-    tilt0, pan0, zoom0 = view.camera
+    tilt0, pan0, zoom0 = camera
+    empty = WorldView(
+        cfg, np.zeros((0, 0, 0), bool), np.zeros((0, 0), bool), np.zeros((0, 0), np.int32),
+        np.zeros((0, 4)), (0, 0, z), camera, 0.0,
+    )  # fmt: skip
     centre = (sx // 2, sy // 2)
     altitudes = [z] if cfg.footprint == "paper" else range(sz)
     best, best_key = ((tilt0, pan0, zoom0), z), None
     for alt in altitudes:
         for tilt in range(0, 91, 5):
             for zoom10 in range(5, 21):
-                n = len(view.footprint((*centre, alt), (tilt, 0, zoom10)))
+                n = len(empty.footprint((*centre, alt), (tilt, 0, zoom10)))
                 steps = abs(tilt - tilt0) // 5 + abs(zoom10 - zoom0) + abs(pan0) // 15
                 cost = steps * cfg.energy_camera + abs(alt - z) * cfg.energy_climb
                 key = (n, -cost)
                 if best_key is None or key > best_key:
                     best, best_key = ((tilt, 0, zoom10), alt), key
     return best
+
+
+def useful_map(view: WorldView, camera: Camera, altitude: int) -> np.ndarray:
+    """Boolean (X, Y): positions at ``altitude`` whose view would add an uncovered cell.
+
+    The footprint is taken at the grid centre and translated (exact for the paper model away
+    from the borders; for the frustum model it ignores occlusion, which is fine for advice).
+    """
+    sx, sy, _ = view.cfg.size
+    cx, cy = sx // 2, sy // 2
+    offsets = view.footprint((cx, cy, altitude), camera) - np.array([cx, cy])
+    todo = view.coverable & (view.views == 0)
+    out = np.zeros_like(todo)
+    _dilate(todo, offsets, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _dilate(todo, offsets, out):
+    """out[x, y] = any(todo[x + dx, y + dy] for (dx, dy) in offsets, inside the grid)."""
+    sx, sy = todo.shape
+    for x in range(sx):
+        for y in range(sy):
+            for k in range(offsets.shape[0]):
+                i, j = x + offsets[k, 0], y + offsets[k, 1]
+                if 0 <= i < sx and 0 <= j < sy and todo[i, j]:
+                    out[x, y] = True
+                    break

@@ -1,0 +1,87 @@
+"""LLM-only control: the advisor drives the UAV (the paper's LLM-only baseline).
+
+Each answer becomes a queue of atomic actions, camera first (tilt, pan, zoom steps towards the
+advised values, snapped to the camera grid), then the move (x, then y, then z). The advisor is
+asked again when the queue is empty. An answer that fails or cannot be parsed, or asks for
+nothing to change, yields one hover step (a camera action that changes nothing) and a new
+question next step; such answers are counted.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pirl.advice.base import Advisor
+from pirl.advice.prompt import build_prompt
+from pirl.advice.recommendation import Recommendation
+from pirl.agents.policy import Policy, hold_action
+from pirl.pare.state import prompt_state
+from pirl.world.planning import WorldView
+from pirl.world.state import WorldBatch
+
+_TILT_UP, _TILT_DOWN, _PAN_UP, _PAN_DOWN, _ZOOM_IN, _ZOOM_OUT = 6, 7, 8, 9, 10, 11
+
+
+def _snap(value: float, step: float, low: float, high: float) -> float:
+    return min(high, max(low, round(value / step) * step))
+
+
+def action_queue(camera: tuple[int, int, int], rec: Recommendation) -> list[int]:
+    """Atomic actions for one recommendation from ``camera`` = (tilt, pan, zoom10)."""
+    tilt, pan, zoom10 = camera
+    want_tilt = int(_snap(rec.tilt, 5, 0, 90))
+    want_pan = int(_snap(rec.pan, 15, -90, 90))
+    want_zoom = round(_snap(rec.zoom * 10, 1, 5, 20))
+    queue: list[int] = []
+    queue += [_TILT_UP if want_tilt > tilt else _TILT_DOWN] * (abs(want_tilt - tilt) // 5)
+    queue += [_PAN_UP if want_pan > pan else _PAN_DOWN] * (abs(want_pan - pan) // 15)
+    queue += [_ZOOM_IN if want_zoom > zoom10 else _ZOOM_OUT] * abs(want_zoom - zoom10)
+    for axis, delta in enumerate((rec.dx, rec.dy, rec.dz)):
+        if delta:
+            queue.append(2 * axis + (0 if delta > 0 else 1))
+    return queue
+
+
+class LLMOnlyPolicy(Policy):
+    """The advisor's answers, executed as action queues."""
+
+    name = "llm-only"
+
+    def __init__(self, advisor: Advisor, prompt_variant: str = "paper") -> None:
+        self.advisor = advisor
+        self.prompt_variant = prompt_variant
+        self.label = f"LLM-only ({advisor.label})"
+        self.queue: list[int] = []
+        self.calls = 0
+        self.failed = 0
+        self.empty = 0
+
+    def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
+        self.world, self.e = world, index
+        self.queue = []
+
+    def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        if not self.queue:
+            prompt = build_prompt(prompt_state(self.world, self.e), self.prompt_variant)
+            self.calls += 1
+            if getattr(self.advisor, "needs_context", False):
+                context = [WorldView.of(self.world, self.e, copy=True)]
+                answer = self.advisor.advise([prompt], context)[0]
+            else:
+                answer = self.advisor.advise([prompt])[0]
+            if answer.recommendation is None:
+                self.failed += 1
+            else:
+                view = WorldView.of(self.world, self.e)
+                self.queue = action_queue(view.camera, answer.recommendation)
+                if not self.queue:
+                    self.empty += 1
+        if self.queue:
+            return self.queue.pop(0)
+        return hold_action(WorldView.of(self.world, self.e).camera)
+
+    def stats(self) -> dict[str, int]:
+        """Advisor calls, failed or unparseable answers, and answers that asked for nothing."""
+        return {"calls": self.calls, "failed": self.failed, "empty": self.empty}

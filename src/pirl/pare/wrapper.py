@@ -1,0 +1,302 @@
+"""PARE during training: a VecEnv wrapper that adds ``w_llm * f_llm`` to every world's reward.
+
+Flow of one step (``mode="sync"``, the paper's timing):
+
+1. After step t-1 the prompt for ``s_t`` of every world due a query is sent to the advisor in
+   a background thread, so the LLM's latency overlaps the policy's forward pass.
+2. ``step_async(a_t)`` remembers ``p_t``; ``step_wait`` steps the worlds, then waits (up to
+   ``timeout_s``) for the answers about ``s_t``, computes the alignment of the move
+   ``p_t -> p_{t+1}`` and of the new camera with the advice, and adds the LLM term to the
+   reward ``r_{t+1}``.
+3. The prompts for ``s_{t+1}`` go out at once.
+
+``mode="async"`` never waits: each world uses the freshest answer that has arrived (reporting
+how many steps stale it is), and a new batch is sent whenever none is in flight.
+
+Between queries (``query_every`` K > 1) the last advice is reused: its move is read as a
+direction from the current position, its camera as a target. A failed, late or unparseable
+answer gives ``f_llm = 0`` for that step and is counted; it never stops training.
+
+Per step, ``info["pare"]`` holds ``f_llm``, ``dir_align``, ``pos_align``, ``move``, ``cam``,
+``status`` (fresh, cached, stale or missing) and ``staleness`` (steps); the LLM term also
+appears in ``info["reward_terms"]["llm"]``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
+
+from pirl.advice.base import Advisor, Answer
+from pirl.advice.prompt import build_prompt
+from pirl.env.rewards import LLM_INDEX
+from pirl.env.vec_env import VCPPVecEnv
+from pirl.pare.alignment import alignment_arrays
+from pirl.pare.state import prompt_state
+from pirl.world import dynamics as D
+from pirl.world.config import ConfigError
+from pirl.world.planning import WorldView
+
+STATUSES = ("missing", "fresh", "cached", "stale")
+_MISSING, _FRESH, _CACHED, _STALE = range(4)
+
+
+@dataclass
+class _Job:
+    """One batch of prompts in flight."""
+
+    worlds: np.ndarray
+    episodes: np.ndarray
+    step: int
+    future: Future
+    sent: float = field(default_factory=time.perf_counter)
+
+
+@dataclass
+class PareStats:
+    """Counters of one PARE run (all cumulative)."""
+
+    steps: int = 0
+    prompts_sent: int = 0
+    batches_sent: int = 0
+    answers_ok: int = 0
+    answers_failed: int = 0
+    answers_unparseable: int = 0
+    answers_late: int = 0
+    answers_cached: int = 0
+    steps_fresh: int = 0
+    steps_cached: int = 0
+    steps_stale: int = 0
+    steps_missing: int = 0
+    staleness_sum: int = 0
+    wait_s: float = 0.0
+    budget_exhausted: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        out = dict(self.__dict__)
+        shaped = self.steps_fresh + self.steps_cached + self.steps_stale
+        out["mean_staleness"] = self.staleness_sum / shaped if shaped else 0.0
+        answered = self.answers_ok + self.answers_unparseable
+        out["parse_rate"] = self.answers_ok / answered if answered else 0.0
+        return out
+
+
+class PAREVecEnv(VecEnvWrapper):
+    """Adds the PARE reward term to a :class:`~pirl.env.vec_env.VCPPVecEnv`.
+
+    Arguments:
+        venv: the batched environment, made with ``llm_weight=True`` so that each episode
+            draws (EWRI) or sets (static) the weight of the LLM term.
+        advisor: any :class:`~pirl.advice.base.Advisor` (wrap it in a cache or budget first).
+        query_every: K, ask every K steps of each world (paper: 1).
+        mode: ``"sync"`` (the paper's timing) or ``"async"`` (never blocks).
+        lam_cam, lam_move, alpha: the weights of DESIGN.md section 5.
+        timeout_s: sync mode: longest wait for a batch; later answers count as late.
+        prompt_variant, decimals: passed to :func:`pirl.advice.prompt.build_prompt`.
+    """
+
+    def __init__(
+        self,
+        venv: VCPPVecEnv,
+        advisor: Advisor,
+        query_every: int = 1,
+        mode: str = "sync",
+        lam_cam: float = 1.0,
+        lam_move: float = 1.0,
+        alpha: float = 0.5,
+        timeout_s: float = 120.0,
+        prompt_variant: str = "paper",
+        decimals: int = 2,
+    ) -> None:
+        if not isinstance(venv, VCPPVecEnv):
+            raise ConfigError("PARE wraps the VCPPVecEnv itself (put VecMonitor outside it)")
+        if not venv.cfg.llm_weight:
+            raise ConfigError("PARE needs an environment made with llm_weight=True")
+        if mode not in ("sync", "async"):
+            raise ConfigError(f"mode={mode!r}: allowed values are sync, async")
+        if query_every < 1:
+            raise ConfigError(f"query_every={query_every!r}: must be >= 1")
+        super().__init__(venv)
+        self.advisor = advisor
+        self.query_every = int(query_every)
+        self.mode = mode
+        self.lam_cam, self.lam_move, self.alpha = float(lam_cam), float(lam_move), float(alpha)
+        self.timeout_s = float(timeout_s)
+        self.prompt_variant, self.decimals = prompt_variant, int(decimals)
+        self.stats = PareStats()
+
+        n = venv.num_envs
+        self._world = venv.world
+        self._size = np.array(venv.cfg.size, dtype=np.float64)
+        self._rec = np.zeros((n, 6), dtype=np.float64)  # pan, tilt, zoom, dx, dy, dz
+        self._has_rec = np.zeros(n, dtype=bool)
+        self._rec_step = np.zeros(n, dtype=np.int64)
+        self._rec_cached = np.zeros(n, dtype=bool)
+        self._episode = np.zeros(n, dtype=np.int64)
+        self._episode_step = np.zeros(n, dtype=np.int64)
+        self._want = np.zeros(n, dtype=bool)  # due a query, not yet sent
+        self._p_t = np.zeros((n, 3), dtype=np.float64)
+        self._t = 0
+        self._job: _Job | None = None
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pare-advisor")
+
+    # -- requests -------------------------------------------------------------------------
+    def _submit(self, worlds: np.ndarray) -> None:
+        """Send the prompts of ``worlds`` (their current state) as one batch."""
+        if not worlds.size or getattr(self.advisor, "exhausted", False):
+            self.stats.budget_exhausted = bool(getattr(self.advisor, "exhausted", False))
+            return
+        w = self._world
+        prompts = [
+            build_prompt(prompt_state(w, int(e)), self.prompt_variant, self.decimals)
+            for e in worlds
+        ]
+        if getattr(self.advisor, "needs_context", False):
+            contexts = [WorldView.of(w, int(e), copy=True) for e in worlds]
+            future = self._pool.submit(self.advisor.advise, prompts, contexts)
+        else:
+            future = self._pool.submit(self.advisor.advise, prompts)
+        self._job = _Job(worlds, self._episode[worlds].copy(), self._t, future)
+        self.stats.prompts_sent += len(prompts)
+        self.stats.batches_sent += 1
+
+    def _send_due(self) -> None:
+        """Mark the worlds due a query this step; send all waiting ones if nothing is in flight."""
+        self._want |= self._episode_step % self.query_every == 0
+        if self._job is None:
+            worlds = np.flatnonzero(self._want)
+            self._want[:] = False
+            self._submit(worlds)
+
+    def _collect(self, wait: bool) -> None:
+        """Take the in-flight batch's answers if they are there (sync: wait for them)."""
+        job = self._job
+        if job is None:
+            return
+        if not wait and not job.future.done():
+            return
+        start = time.perf_counter()
+        try:
+            answers: list[Answer] = job.future.result(timeout=self.timeout_s if wait else 0)
+        except FutureTimeout:
+            # Late: the step goes on without advice; the batch is dropped.
+            self.stats.answers_late += len(job.worlds)
+            self.stats.wait_s += time.perf_counter() - start
+            self._job = None
+            self._has_rec[job.worlds] = False
+            return
+        except Exception as exc:  # an advisor must not raise; if one does, training goes on
+            answers = [Answer("", None, error=f"{type(exc).__name__}: {exc}")] * len(job.worlds)
+        self.stats.wait_s += time.perf_counter() - start
+        self._job = None
+        for e, episode, answer in zip(job.worlds, job.episodes, answers, strict=True):
+            if answer.error is not None:
+                self.stats.answers_failed += 1
+            elif answer.recommendation is None:
+                self.stats.answers_unparseable += 1
+            else:
+                self.stats.answers_ok += 1
+                self.stats.answers_cached += int(answer.from_cache)
+            if episode != self._episode[e]:
+                continue  # that episode is over
+            rec = answer.recommendation
+            if rec is None:
+                self._has_rec[e] = False
+                continue
+            self._rec[e] = (rec.pan, rec.tilt, rec.zoom, rec.dx, rec.dy, rec.dz)
+            self._has_rec[e] = True
+            self._rec_step[e] = job.step
+            self._rec_cached[e] = answer.from_cache
+
+    # -- VecEnv ---------------------------------------------------------------------------
+    def reset(self) -> np.ndarray:
+        obs = self.venv.reset()
+        self._drain()
+        self._has_rec[:] = False
+        self._episode += 1
+        self._episode_step[:] = 0
+        self._want[:] = False
+        self._send_due()
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        ints = self._world.ints
+        self._p_t[:] = ints[:, D.PX : D.PZ + 1]
+        self.venv.step_async(actions)
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self._collect(wait=self.mode == "sync")
+        snap = self.venv.step_snapshot
+        # The snapshot was taken before auto-reset: it holds p_{t+1}, the camera after the
+        # action and the ended episodes' weights.
+        p_next = snap.ints[:, D.PX : D.PZ + 1].astype(np.float64)
+        cam_next = snap.ints[:, [D.TILT, D.PAN, D.ZOOM]].astype(np.float64)
+        cam_next[:, 2] /= 10.0
+        dir_align, pos_align, move, cam = alignment_arrays(
+            self._p_t, p_next, cam_next, self._rec, self._size, self.alpha
+        )
+        has = self._has_rec
+        f_llm = np.where(has, self.lam_cam * cam + self.lam_move * move, 0.0)
+        status = np.full(self.num_envs, _MISSING, dtype=np.int64)
+        staleness = np.where(has, self._t - self._rec_step, 0)
+        status[has & (staleness == 0)] = _FRESH
+        status[has & (staleness == 0) & self._rec_cached] = _CACHED
+        status[has & (staleness > 0)] = _STALE
+        self._count(status, staleness)
+
+        snap.terms[:, D.T_LLM] = f_llm
+        shaped = rewards + (snap.weights[:, LLM_INDEX] * f_llm).astype(np.float32)
+        table = np.stack([f_llm, dir_align, pos_align, move, cam], axis=1)
+        values = np.where(has[:, None], table, 0.0).tolist()
+        codes, stale_list = status.tolist(), staleness.tolist()
+        snap.extras["pare"] = lambda e: {
+            "f_llm": values[e][0],
+            "dir_align": values[e][1],
+            "pos_align": values[e][2],
+            "move": values[e][3],
+            "cam": values[e][4],
+            "status": STATUSES[codes[e]],
+            "staleness": stale_list[e],
+        }
+
+        self._t += 1
+        self._episode_step += 1
+        ended = np.flatnonzero(dones)
+        if ended.size:
+            self._episode[ended] += 1
+            self._episode_step[ended] = 0
+            self._has_rec[ended] = False
+            self._want[ended] = False
+        self._send_due()
+        return obs, shaped, dones, infos
+
+    def _count(self, status: np.ndarray, staleness: np.ndarray) -> None:
+        s = self.stats
+        s.steps += self.num_envs
+        s.steps_fresh += int((status == _FRESH).sum())
+        s.steps_cached += int((status == _CACHED).sum())
+        s.steps_stale += int((status == _STALE).sum())
+        s.steps_missing += int((status == _MISSING).sum())
+        s.staleness_sum += int(staleness[status != _MISSING].sum())
+        s.budget_exhausted = bool(getattr(self.advisor, "exhausted", False))
+
+    def _drain(self) -> None:
+        if self._job is not None:
+            # An unfinished batch is dropped at reset; its outcome no longer matters.
+            with contextlib.suppress(Exception):
+                self._job.future.result(timeout=self.timeout_s)
+            self._job = None
+
+    def close(self) -> None:
+        self._drain()
+        self._pool.shutdown(wait=True)
+        self.advisor.close()
+        self.venv.close()
