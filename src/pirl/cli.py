@@ -122,3 +122,44 @@ def demo(
 
 def main() -> None:  # pragma: no cover - console entry point
     app()
+
+
+@app.command()
+@_clean_errors
+def train(
+    method: Annotated[str, typer.Option(help="pirl, ppo-sr, ppo-ewri or il.")],
+    out: Annotated[Path, typer.Option(help="Run folder to create (or resume).")],
+    config: Annotated[Path, typer.Option(help="Preset YAML, e.g. configs/quick.yaml.")] = Path(
+        "configs/quick.yaml"
+    ),
+    steps: Annotated[int | None, typer.Option(help="Override train.total_steps.")] = None,
+    seed: Annotated[int, typer.Option(help="Training seed.")] = 0,
+    advisor: Annotated[
+        str | None, typer.Option(help="pirl: local, openai or oracle (default: the config's).")
+    ] = None,
+    expert: Annotated[Path | None, typer.Option(help="il: a finished ppo-ewri run.")] = None,
+    resume: Annotated[bool, typer.Option(help="Continue the run in --out.")] = False,
+) -> None:
+    """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
+    from pirl.agents.config import RunConfig
+    from pirl.agents.train import TrainingInterrupted
+    from pirl.agents.train import train as run_training
+
+    cfg = RunConfig.from_yaml(config)
+    if steps is not None:
+        cfg = cfg.with_overrides(train={"total_steps": steps})
+    if advisor is not None:
+        cfg = cfg.with_overrides(pare={"advisor": advisor})
+    try:
+        if method == "il":
+            from pirl.agents.imitation import train_il
+
+            if expert is None:
+                raise ConfigError("--method il needs --expert runs/<a finished ppo-ewri run>")
+            result = train_il(cfg, expert, out, seed=seed, resume=resume)
+        else:
+            result = run_training(method, cfg, out, seed=seed, resume=resume)
+    except TrainingInterrupted as stop:
+        err.print(f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume")
+        raise typer.Exit(130) from None
+    console.print(f"done: {result}")

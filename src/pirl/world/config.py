@@ -162,17 +162,8 @@ class VCPPConfig:
         """Build from a mapping, refusing unknown keys and coercing lists to tuples."""
         if not isinstance(values, Mapping):
             raise ConfigError(f"expected a mapping of settings, got {type(values).__name__}")
-        known = [f.name for f in fields(cls)]
-        kwargs: dict[str, Any] = {}
-        for key, value in values.items():
-            if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise ConfigError(
-                    f"unknown setting {key!r}{hint}; allowed keys: {', '.join(sorted(known))}"
-                )
-            kwargs[key] = _coerce(key, value)
-        return cls(**kwargs)
+        check_keys(values, [f.name for f in fields(cls)])
+        return cls(**{key: _coerce(key, value) for key, value in values.items()})
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> VCPPConfig:
@@ -201,6 +192,18 @@ class VCPPConfig:
                 value = [list(v) if isinstance(v, tuple) else v for v in value]
             out[f.name] = value
         return out
+
+
+def check_keys(values: Mapping[str, Any], known: list[str], section: str = "") -> None:
+    """Refuse keys not in ``known``, naming the key, a close match and the allowed keys."""
+    for key in values:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            where = f" in section {section!r}" if section else ""
+            raise ConfigError(
+                f"unknown setting {key!r}{where}{hint}; allowed keys: {', '.join(sorted(known))}"
+            )
 
 
 def _coerce(key: str, value: Any) -> Any:
@@ -316,5 +319,6 @@ __all__ = [
     "STATIC_WEIGHTS",
     "ConfigError",
     "VCPPConfig",
+    "check_keys",
     "zoom_to_tenths",
 ]

@@ -1,0 +1,162 @@
+"""Resumable training state: everything needed to continue a PPO run exactly.
+
+A checkpoint is a folder ``checkpoints/step_<N>/`` holding the SB3 model (weights and
+optimizer) and ``state.pkl`` (worlds, their random streams, PARE's state, the monitor's
+counters, the last observation and the global random states). It is written into a temporary
+folder and renamed, and ``checkpoints/LATEST`` is replaced atomically afterwards, so an
+interrupted write never damages the last good checkpoint.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import pickle
+import random
+import shutil
+from concurrent.futures import Future
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import VecMonitor
+
+from pirl.env.vec_env import VCPPVecEnv
+
+_WORLD_ARRAYS = (
+    "ints", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
+    "blk_total", "obstacles", "terms", "flags",
+)  # fmt: skip
+_PARE_ARRAYS = (
+    "_rec", "_has_rec", "_rec_step", "_rec_cached", "_episode", "_episode_step", "_want", "_p_t",
+)  # fmt: skip
+
+
+def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:
+    """An in-memory copy of the whole training state (taken at a rollout boundary)."""
+    world, core = venv.world, venv.core
+    state: dict[str, Any] = {
+        "num_timesteps": int(model.num_timesteps),
+        "policy": {k: v.detach().clone() for k, v in model.policy.state_dict().items()},
+        "optimizer": copy.deepcopy(model.policy.optimizer.state_dict()),
+        "last_obs": np.copy(model._last_obs),
+        "last_episode_starts": np.copy(model._last_episode_starts),
+        "ep_info_buffer": list(model.ep_info_buffer or []),
+        "world": {name: getattr(world, name).copy() for name in _WORLD_ARRAYS},
+        "weights": core.weights.copy(),
+        "rngs": copy.deepcopy(venv._rngs),
+        "monitor": {
+            "episode_returns": monitor.episode_returns.copy(),
+            "episode_lengths": monitor.episode_lengths.copy(),
+            "episode_count": monitor.episode_count,
+        },
+        "torch_rng": torch.get_rng_state(),
+        "numpy_rng": np.random.get_state(),
+        "python_rng": random.getstate(),
+    }
+    if pare is not None:
+        job = pare._job
+        pending = None
+        if job is not None and pare.mode == "sync":
+            # Sync mode waits for these answers anyway; keeping them makes a resume exact.
+            pending = (job.worlds, job.episodes, job.step, job.future.result())
+        state["pare"] = {
+            "arrays": {name: getattr(pare, name).copy() for name in _PARE_ARRAYS},
+            "t": pare._t,
+            "stats": copy.deepcopy(pare.stats),
+            "pending": pending,
+        }
+    return state
+
+
+def restore(
+    state: dict, model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None
+) -> None:
+    """Put a captured state back into a freshly built model and environment stack."""
+    from pirl.pare.wrapper import _Job
+
+    model.policy.load_state_dict(state["policy"])
+    model.policy.optimizer.load_state_dict(state["optimizer"])
+    model.num_timesteps = state["num_timesteps"]
+    model._last_obs = state["last_obs"]
+    model._last_episode_starts = state["last_episode_starts"]
+    model.ep_info_buffer = None  # rebuilt by learn(); refilled below
+    world, core = venv.world, venv.core
+    for name, value in state["world"].items():
+        getattr(world, name)[...] = value
+    core.weights[...] = state["weights"]
+    venv._rngs = copy.deepcopy(state["rngs"])
+    monitor.episode_returns = state["monitor"]["episode_returns"].copy()
+    monitor.episode_lengths = state["monitor"]["episode_lengths"].copy()
+    monitor.episode_count = state["monitor"]["episode_count"]
+    if pare is not None and "pare" in state:
+        saved = state["pare"]
+        for name, value in saved["arrays"].items():
+            getattr(pare, name)[...] = value
+        pare._t = saved["t"]
+        pare.stats = copy.deepcopy(saved["stats"])
+        pare._job = None
+        if saved["pending"] is not None:
+            worlds, episodes, step, answers = saved["pending"]
+            future: Future = Future()
+            future.set_result(answers)
+            pare._job = _Job(worlds, episodes, step, future)
+    torch.set_rng_state(state["torch_rng"])
+    np.random.set_state(state["numpy_rng"])
+    random.setstate(state["python_rng"])
+
+
+def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
+    """Write ``state`` as ``folder/step_<N>`` atomically and point LATEST at it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    name = f"step_{state['num_timesteps']}"
+    final = folder / name
+    tmp = folder / f".{name}.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    # The model file must hold the captured weights, not the live ones.
+    live = {k: v.detach().clone() for k, v in model.policy.state_dict().items()}
+    live_opt = copy.deepcopy(model.policy.optimizer.state_dict())
+    live_steps = model.num_timesteps
+    try:
+        model.policy.load_state_dict(state["policy"])
+        model.policy.optimizer.load_state_dict(state["optimizer"])
+        model.num_timesteps = state["num_timesteps"]
+        model.save(tmp / "model.zip")
+    finally:
+        model.policy.load_state_dict(live)
+        model.policy.optimizer.load_state_dict(live_opt)
+        model.num_timesteps = live_steps
+    with open(tmp / "state.pkl", "wb") as fh:
+        pickle.dump(state, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    _atomic_text(folder / "LATEST", name)
+    for old in sorted(folder.glob("step_*"), key=lambda p: int(p.name.split("_")[1]))[:-keep]:
+        if old.name != name:
+            shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def latest(folder: Path) -> Path | None:
+    """The checkpoint LATEST points at, or None."""
+    pointer = folder / "LATEST"
+    if not pointer.is_file():
+        return None
+    path = folder / pointer.read_text().strip()
+    return path if (path / "state.pkl").is_file() and (path / "model.zip").is_file() else None
+
+
+def load_state(path: Path) -> dict:
+    with open(path / "state.pkl", "rb") as fh:
+        return pickle.load(fh)
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)

@@ -1,0 +1,242 @@
+"""Run configuration: every value a user may change for training, in one YAML file.
+
+A preset (``configs/quick.yaml``, ``paper.yaml``, ``test.yaml``) has the sections below; each
+section is a dataclass with a docstring per field. Unknown keys, wrong types and impossible
+values are refused with a message naming the section and key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pirl.world.config import ConfigError, VCPPConfig, check_keys
+
+
+@dataclass(frozen=True)
+class PPOSettings:
+    """Stable-Baselines3 PPO and the batched environment it trains on."""
+
+    n_envs: int = 16
+    """Worlds stepped together (one VCPPVecEnv)."""
+    n_steps: int = 256
+    """Steps per world per rollout."""
+    batch_size: int = 1024
+    """Minibatch size of the PPO update."""
+    n_epochs: int = 4
+    """Passes over each rollout."""
+    learning_rate: float = 3e-4
+    """Adam step size (linearly decayed to 0 when lr_schedule is 'linear')."""
+    lr_schedule: str = "constant"
+    """'constant' or 'linear'."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    clip_range: float = 0.2
+    """PPO clip range."""
+    ent_coef: float = 0.01
+    """Entropy bonus."""
+    vf_coef: float = 0.5
+    """Value loss weight."""
+    max_grad_norm: float = 0.5
+    """Gradient clipping."""
+    net_arch: tuple[int, ...] = (256, 256)
+    """Hidden layers of the separate policy and value MLPs."""
+    torch_threads: int = 1
+    """Threads for PyTorch (the envs and an LLM share the cores)."""
+    device: str = "auto"
+    """'auto' (CUDA when present, else CPU), 'cpu' or 'cuda'."""
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Length, checkpoints and logging of a run."""
+
+    total_steps: int = 300_000
+    """Environment steps (all worlds together)."""
+    checkpoint_every: int = 50_000
+    """Write a resumable checkpoint at the first rollout boundary after every this many steps."""
+    log_every_s: float = 10.0
+    """Seconds between plain progress lines when the output is not a terminal."""
+
+
+@dataclass(frozen=True)
+class PareSettings:
+    """PIRL's reward shaping (DESIGN.md section 5)."""
+
+    advisor: str = "local"
+    """'local' (embedded model), 'openai' (any OpenAI-compatible server) or 'oracle'."""
+    mode: str = "async"
+    """'sync' (the paper's timing) or 'async' (never waits for the LLM)."""
+    query_every: int = 1
+    """K: ask every K steps of each world."""
+    lam_cam: float = 1.0
+    """Weight of the camera alignment."""
+    lam_move: float = 1.0
+    """Weight of the move alignment."""
+    alpha: float = 0.5
+    """Direction vs position alignment."""
+    timeout_s: float = 120.0
+    """Sync mode: longest wait for a batch of answers."""
+    cache: bool = True
+    """Keep answers in the persistent SQLite cache."""
+    cache_path: str = ""
+    """Cache file; empty means ~/.cache/pirl/advice.sqlite (or $PIRL_CACHE_DIR)."""
+    budget_calls: int = 0
+    """Stop asking after this many LLM calls (0 = no limit)."""
+    budget_tokens: int = 0
+    """Stop asking after this many tokens (0 = no limit)."""
+    prompt_variant: str = "paper"
+    """Prompt variant of pirl.advice.build_prompt."""
+
+
+@dataclass(frozen=True)
+class AdvisorSettings:
+    """LLM backends. The API key is never here: it comes from the environment variable."""
+
+    local_model: str = ""
+    """Hugging Face model folder for 'local'; empty = embedded SmolLM2-135M-Instruct."""
+    local_threads: int = 1
+    """CPU threads of the local model."""
+    local_batch_size: int = 32
+    """Largest batch of prompts per generate call."""
+    openai_model: str = "gpt-3.5-turbo"
+    """Model name for 'openai'."""
+    openai_base_url: str = ""
+    """OpenAI-compatible server (Ollama, vLLM, llama.cpp...); empty = api.openai.com."""
+    openai_api_key_env: str = "OPENAI_API_KEY"
+    """Name of the environment variable holding the key."""
+    openai_timeout_s: float = 30.0
+    """Per-request timeout."""
+    openai_max_retries: int = 4
+    """Retries with backoff on rate limits and dropped connections."""
+    openai_concurrency: int = 8
+    """Requests in flight at once."""
+
+
+@dataclass(frozen=True)
+class ILSettings:
+    """Imitation learning (TabNet on PPO-EWRI rollouts)."""
+
+    expert_steps: int = 20_000
+    """Expert transitions collected on the training world."""
+    valid_fraction: float = 0.2
+    """Share held out for validation and early stopping."""
+    max_epochs: int = 60
+    """Most TabNet epochs."""
+    patience: int = 8
+    """Epochs without validation improvement before stopping."""
+    batch_size: int = 1024
+    """TabNet batch size."""
+
+
+_SECTIONS = {
+    "ppo": PPOSettings,
+    "train": TrainSettings,
+    "pare": PareSettings,
+    "advisor": AdvisorSettings,
+    "il": ILSettings,
+}
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A whole preset: the environment plus every training section."""
+
+    env: VCPPConfig = field(default_factory=VCPPConfig)
+    ppo: PPOSettings = field(default_factory=PPOSettings)
+    train: TrainSettings = field(default_factory=TrainSettings)
+    pare: PareSettings = field(default_factory=PareSettings)
+    advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
+    il: ILSettings = field(default_factory=ILSettings)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunConfig:
+        if not isinstance(data, dict):
+            raise ConfigError("a run config is a mapping of sections")
+        check_keys(data, ["env", *_SECTIONS])
+        parts: dict[str, Any] = {"env": VCPPConfig.from_dict(data.get("env") or {})}
+        for name, section in _SECTIONS.items():
+            values = data.get(name) or {}
+            if not isinstance(values, dict):
+                raise ConfigError(f"section {name!r} must be a mapping")
+            check_keys(values, [f.name for f in fields(section)], name)
+            kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+            parts[name] = section(**kwargs)
+        return cls(**parts)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> RunConfig:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file not found: {path}")
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+        return cls.from_dict(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"env": self.env.to_dict()}
+        for name in _SECTIONS:
+            values = asdict(getattr(self, name))
+            out[name] = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+        return out
+
+    def with_overrides(self, **sections: dict[str, Any]) -> RunConfig:
+        """A copy with some values changed, e.g. ``with_overrides(train={"total_steps": 10})``."""
+        data = self.to_dict()
+        for name, values in sections.items():
+            data.setdefault(name, {}).update(values)
+        return RunConfig.from_dict(data)
+
+
+def _validate(cfg: RunConfig) -> None:
+    for name in _SECTIONS:
+        section = getattr(cfg, name)
+        for f in fields(section):
+            value, default = getattr(section, f.name), f.default
+            expected = type(default)
+            if expected is float and isinstance(value, int) and not isinstance(value, bool):
+                continue
+            if not isinstance(value, expected) or (
+                isinstance(value, bool) and expected is not bool
+            ):
+                raise ConfigError(
+                    f"{name}.{f.name}={value!r} has type {type(value).__name__}; "
+                    f"expected {expected.__name__}"
+                )
+    p, t, pare = cfg.ppo, cfg.train, cfg.pare
+    positive = {
+        "ppo.n_envs": p.n_envs, "ppo.n_steps": p.n_steps, "ppo.batch_size": p.batch_size,
+        "ppo.n_epochs": p.n_epochs, "ppo.learning_rate": p.learning_rate,
+        "ppo.torch_threads": p.torch_threads, "train.total_steps": t.total_steps,
+        "train.checkpoint_every": t.checkpoint_every, "pare.query_every": pare.query_every,
+        "pare.timeout_s": pare.timeout_s, "il.expert_steps": cfg.il.expert_steps,
+        "il.max_epochs": cfg.il.max_epochs, "il.batch_size": cfg.il.batch_size,
+    }  # fmt: skip
+    for key, value in positive.items():
+        if value <= 0:
+            raise ConfigError(f"{key}={value!r}: must be > 0")
+    choices = {
+        "ppo.lr_schedule": (p.lr_schedule, ("constant", "linear")),
+        "ppo.device": (p.device, ("auto", "cpu", "cuda")),
+        "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
+        "pare.mode": (pare.mode, ("sync", "async")),
+    }
+    for key, (value, allowed) in choices.items():
+        if value not in allowed:
+            raise ConfigError(f"{key}={value!r}: allowed values are {', '.join(allowed)}")
+    if not 0 < cfg.il.valid_fraction < 1:
+        raise ConfigError(f"il.valid_fraction={cfg.il.valid_fraction!r}: must be in (0, 1)")
+    if not all(isinstance(n, int) and n > 0 for n in p.net_arch):
+        raise ConfigError(f"ppo.net_arch={list(p.net_arch)!r}: must be positive layer sizes")
+    if not 0 < p.gamma <= 1 or not 0 < p.gae_lambda <= 1:
+        raise ConfigError("ppo.gamma and ppo.gae_lambda must be in (0, 1]")

@@ -1,0 +1,413 @@
+"""Training PIRL, PPO-SR and PPO-EWRI with Stable-Baselines3 PPO, top to bottom.
+
+``train()`` is what ``pirl train`` calls. Reading it in order follows one run:
+
+1. :func:`prepare_run_folder` refuses to overwrite a run, or finds the checkpoint to resume.
+2. :func:`build_env_stack` makes the batched worlds (``make_vec_env``), wraps them in PARE for
+   ``pirl`` (the advisor's reward term), then in SB3's ``VecMonitor``.
+3. :func:`build_ppo` makes the PPO model (MLP actor and critic on the 317-value observation).
+4. ``model.learn`` runs with :class:`RunCallback`, which checkpoints at rollout boundaries,
+   logs reward terms, coverage and PARE statistics to TensorBoard and ``episodes.csv``, and
+   shows progress. Ctrl-C writes the last rollout-boundary state as a checkpoint.
+5. The final model and statistics are written; ``meta.json`` says the run is complete.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecMonitor
+
+from pirl.agents import checkpoint
+from pirl.agents.config import RunConfig
+from pirl.env.vec_env import VCPPVecEnv, make_vec_env
+from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
+
+PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
+EPISODE_COLUMNS = (
+    "timesteps", "world", "vcr", "be", "rvc", "overlap", "steps", "collisions", "battery_left",
+    "camera_share", "mean_footprint",
+)  # fmt: skip
+
+
+def env_config_for(method: str, cfg: RunConfig) -> VCPPConfig:
+    """The environment a method trains on: static weights for PPO-SR, EWRI otherwise, and the
+    LLM weight switched on for PIRL."""
+    if method not in PPO_METHODS:
+        raise ConfigError(f"method {method!r}: PPO methods are {', '.join(PPO_METHODS)}")
+    reward = "static" if method == "ppo-sr" else "ewri"
+    return cfg.env.replace(reward=reward, llm_weight=method == "pirl")
+
+
+def train_seed_base(seed: int) -> int:
+    """World i of a run with ``seed`` starts from scenario seed ``base + i``.
+
+    Evaluation scenario seeds start at 10**9, so training never sees them.
+    """
+    return 1_000 * seed
+
+
+# -- 1. run folder --------------------------------------------------------------------------
+def prepare_run_folder(out: Path, resume: bool) -> Path | None:
+    """Create ``out`` for a new run, or return the checkpoint to resume from.
+
+    A folder that exists without ``resume`` is an error: runs are never overwritten.
+    """
+    if resume:
+        if not out.is_dir():
+            raise ConfigError(f"--resume: run folder {out} does not exist")
+        ckpt = checkpoint.latest(out / "checkpoints")
+        if ckpt is None:
+            raise ConfigError(f"--resume: no complete checkpoint in {out / 'checkpoints'}")
+        return ckpt
+    if out.exists():
+        raise ConfigError(
+            f"run folder {out} already exists; pass --resume to continue it or choose --out"
+        )
+    out.mkdir(parents=True)
+    return None
+
+
+def git_commit() -> str:
+    """The code's git commit (with '-dirty' when modified), or 'unknown'."""
+    root = Path(__file__).resolve().parents[3]
+    try:
+        sha = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, timeout=10,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (sha + ("-dirty" if dirty else "")) if sha else "unknown"
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write JSON atomically (temporary file, then rename)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
+    os.replace(tmp, path)
+
+
+# -- 2. environments ------------------------------------------------------------------------
+@dataclass
+class EnvStack:
+    """The wrapped training environment and handles on its layers."""
+
+    env: VecMonitor
+    venv: VCPPVecEnv
+    pare: Any | None
+
+
+def build_env_stack(method: str, cfg: RunConfig, seed: int, advisor: Any | None) -> EnvStack:
+    """make_vec_env -> (PARE for pirl) -> VecMonitor."""
+    venv = make_vec_env(
+        cfg.ppo.n_envs, seed=train_seed_base(seed), config=env_config_for(method, cfg)
+    )
+    pare = None
+    inner = venv
+    if method == "pirl":
+        from pirl.pare.wrapper import PAREVecEnv
+
+        if advisor is None:
+            raise ConfigError("pirl needs an advisor")
+        p = cfg.pare
+        pare = PAREVecEnv(
+            venv, advisor, query_every=p.query_every, mode=p.mode, lam_cam=p.lam_cam,
+            lam_move=p.lam_move, alpha=p.alpha, timeout_s=p.timeout_s,
+            prompt_variant=p.prompt_variant,
+        )  # fmt: skip
+        inner = pare
+    return EnvStack(VecMonitor(inner), venv, pare)
+
+
+# -- 3. the PPO model ------------------------------------------------------------------------
+def pick_device(setting: str) -> str:
+    if setting == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("ppo.device='cuda' but no CUDA device is available")
+    return setting
+
+
+def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path) -> PPO:
+    """SB3 PPO with separate MLPs for actor and critic (the observation is a flat vector of
+    local maps, a coarse global map and scalars, so an MLP reads it directly)."""
+    p = cfg.ppo
+    lr = p.learning_rate
+    learning_rate = (lambda progress: progress * lr) if p.lr_schedule == "linear" else lr
+    return PPO(
+        "MlpPolicy",
+        env,
+        learning_rate=learning_rate,
+        n_steps=p.n_steps,
+        batch_size=p.batch_size,
+        n_epochs=p.n_epochs,
+        gamma=p.gamma,
+        gae_lambda=p.gae_lambda,
+        clip_range=p.clip_range,
+        ent_coef=p.ent_coef,
+        vf_coef=p.vf_coef,
+        max_grad_norm=p.max_grad_norm,
+        policy_kwargs={"net_arch": {"pi": list(p.net_arch), "vf": list(p.net_arch)}},
+        tensorboard_log=str(tb_dir),
+        seed=seed,
+        device=pick_device(p.device),
+        verbose=0,
+    )
+
+
+# -- 4. the callback -------------------------------------------------------------------------
+class RunCallback(BaseCallback):
+    """Checkpoints, TensorBoard scalars, episodes.csv and progress for one run."""
+
+    def __init__(
+        self, out: Path, stack: EnvStack, cfg: RunConfig, total: int, progress: Any, csv_rows: int
+    ) -> None:
+        super().__init__()
+        self.out, self.stack, self.cfg, self.total = out, stack, cfg, total
+        self.progress = progress
+        self.snapshot: dict | None = None
+        self.next_checkpoint = 0
+        self.csv_path = out / "episodes.csv"
+        self.csv_rows = csv_rows
+        self._terms_sum = np.zeros(len(REWARD_TERMS))
+        self._terms_n = 0
+        self._episodes: list[dict[str, float]] = []
+        self._recent_vcr: list[float] = []
+
+    def _on_training_start(self) -> None:
+        every = self.cfg.train.checkpoint_every
+        self.next_checkpoint = (self.num_timesteps // every + 1) * every
+        _truncate_csv(self.csv_path, self.csv_rows)
+        new = not self.csv_path.exists()
+        self._csv_file = open(self.csv_path, "a", newline="")  # noqa: SIM115 - closed at end
+        self._csv = csv.writer(self._csv_file)
+        if new:
+            self._csv.writerow(EPISODE_COLUMNS)
+
+    def _on_rollout_start(self) -> None:
+        # A rollout boundary: the state here resumes exactly. Keep it for Ctrl-C.
+        s = self.stack
+        self.snapshot = checkpoint.capture(self.model, s.env, s.venv, s.pare)
+        self.snapshot["csv_rows"] = self.csv_rows
+        if self.num_timesteps >= self.next_checkpoint:
+            self.save_snapshot()
+            every = self.cfg.train.checkpoint_every
+            self.next_checkpoint = (self.num_timesteps // every + 1) * every
+
+    def save_snapshot(self) -> Path | None:
+        if self.snapshot is None:
+            return None
+        self._csv_file.flush()
+        return checkpoint.write(self.snapshot, self.model, self.out / "checkpoints")
+
+    def _on_step(self) -> bool:
+        snap = self.stack.venv.step_snapshot
+        self._terms_sum += snap.terms.sum(axis=0)
+        self._terms_n += snap.terms.shape[0]
+        dones, infos = self.locals["dones"], self.locals["infos"]
+        for e in np.flatnonzero(dones):
+            m = infos[e]["episode_metrics"]
+            self._csv.writerow([self.num_timesteps, int(e)] + [m[c] for c in EPISODE_COLUMNS[2:]])
+            self.csv_rows += 1
+            self._episodes.append(m)
+            self._recent_vcr = (self._recent_vcr + [m["vcr"]])[-50:]
+        self.progress.update(self.num_timesteps, self.recent_vcr(), self.advisor_calls())
+        return True
+
+    def _on_rollout_end(self) -> None:
+        log = self.logger.record
+        if self._terms_n:
+            for name, value in zip(REWARD_TERMS, self._terms_sum / self._terms_n, strict=True):
+                log(f"reward_terms/{name}", float(value))
+        if self._episodes:
+            for key in ("vcr", "be", "rvc", "steps", "collisions", "camera_share"):
+                log(f"episode/{key}", float(np.mean([m[key] for m in self._episodes])))
+        pare = self.stack.pare
+        if pare is not None:
+            for key, value in pare.stats.as_dict().items():
+                if isinstance(value, int | float):
+                    log(f"pare/{key}", float(value))
+        self._terms_sum[:] = 0
+        self._terms_n = 0
+        self._episodes = []
+        self._csv_file.flush()
+
+    def _on_training_end(self) -> None:
+        self._csv_file.close()
+
+    def recent_vcr(self) -> float | None:
+        return float(np.mean(self._recent_vcr)) if self._recent_vcr else None
+
+    def advisor_calls(self) -> int | None:
+        pare = self.stack.pare
+        return pare.stats.prompts_sent if pare is not None else None
+
+
+def _truncate_csv(path: Path, rows: int) -> None:
+    """Drop episode rows written after the checkpoint being resumed."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[: rows + 1]))
+
+
+class Progress:
+    """A live bar on a terminal, plain log lines otherwise."""
+
+    def __init__(self, total: int, label: str, every_s: float, enabled: bool = True) -> None:
+        self.total, self.label, self.every_s, self.enabled = total, label, every_s, enabled
+        self.tty = enabled and sys.stderr.isatty()
+        self.start = time.perf_counter()
+        self.first: int | None = None
+        self.last_log = 0.0
+        self._bar = None
+        if self.tty:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                TextColumn,
+                TimeRemainingColumn,
+            )
+            from rich.progress import Progress as RichProgress
+
+            self._bar = RichProgress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[info]}"),
+                TimeRemainingColumn(),
+                transient=False,
+            )
+            self._task = self._bar.add_task(label, total=total, info="")
+            self._bar.start()
+
+    def update(self, steps: int, vcr: float | None, calls: int | None) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if self.first is None:
+            self.first = steps
+        fps = (steps - self.first) / max(1e-9, now - self.start)
+        info = f"{fps:,.0f} fps"
+        if vcr is not None:
+            info += f"  VCR(recent) {vcr:.2f}"
+        if calls is not None:
+            info += f"  advisor calls {calls:,}"
+        if self._bar is not None:
+            self._bar.update(self._task, completed=min(steps, self.total), info=info)
+        elif now - self.last_log >= self.every_s or steps >= self.total:
+            self.last_log = now
+            print(f"[{self.label}] {steps:,}/{self.total:,} steps  {info}", flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+
+# -- the whole run ---------------------------------------------------------------------------
+def train(
+    method: str,
+    cfg: RunConfig,
+    out: Path,
+    seed: int = 0,
+    resume: bool = False,
+    advisor: Any | None = None,
+    show_progress: bool = True,
+) -> Path:
+    """Train ``method`` with ``cfg`` into run folder ``out``; returns the final model path.
+
+    ``advisor`` (pirl only) defaults to the one the config names. Interrupting with Ctrl-C
+    writes a checkpoint; ``resume=True`` continues from the latest one.
+    """
+    out = Path(out)
+    env_config_for(method, cfg)  # validates the method before touching the disk
+    ckpt = prepare_run_folder(out, resume)
+    torch.set_num_threads(cfg.ppo.torch_threads)
+    if method == "pirl" and advisor is None:
+        from pirl.advice.factory import make_advisor
+
+        advisor = make_advisor(cfg.pare.advisor, cfg)
+    meta = {
+        "method": method,
+        "seed": seed,
+        "git_commit": git_commit(),
+        "advisor": getattr(advisor, "label", None),
+        "complete": False,
+        "total_steps": cfg.train.total_steps,
+    }
+    if ckpt is None:
+        (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+        write_json(out / "meta.json", meta)
+    stack = build_env_stack(method, cfg, seed, advisor)
+    model = build_ppo(stack.env, cfg, seed, out / "tb")
+    csv_rows = 0
+    if ckpt is not None:
+        state = checkpoint.load_state(ckpt)
+        checkpoint.restore(state, model, stack.env, stack.venv, stack.pare)
+        csv_rows = state.get("csv_rows", 0)
+    total = cfg.train.total_steps
+    progress = Progress(total, method, cfg.train.log_every_s, show_progress)
+    callback = RunCallback(out, stack, cfg, total, progress, csv_rows)
+    remaining = max(0, total - model.num_timesteps)
+    try:
+        if remaining:
+            model.learn(
+                total_timesteps=remaining,
+                callback=callback,
+                reset_num_timesteps=ckpt is None,
+                tb_log_name="ppo",
+            )
+    except KeyboardInterrupt:
+        progress.close()
+        saved = callback.save_snapshot()
+        stack.env.close()
+        raise TrainingInterrupted(saved) from None
+    progress.close()
+    final = out / "model.zip"
+    tmp = out / "model.tmp.zip"
+    model.save(tmp)
+    os.replace(tmp, final)
+    if stack.pare is not None:
+        write_json(out / "advisor_stats.json", _advisor_stats(stack.pare, advisor))
+    meta.update(complete=True, timesteps=int(model.num_timesteps))
+    write_json(out / "meta.json", meta)
+    stack.env.close()
+    return final
+
+
+class TrainingInterrupted(Exception):
+    """Ctrl-C during training; ``checkpoint`` is where the state was saved (or None)."""
+
+    def __init__(self, saved: Path | None) -> None:
+        super().__init__(f"interrupted; checkpoint: {saved}")
+        self.checkpoint = saved
+
+
+def _advisor_stats(pare: Any, advisor: Any) -> dict[str, Any]:
+    stats = pare.stats.as_dict()
+    stats["advisor"] = getattr(advisor, "label", str(advisor))
+    for attr in ("hits", "misses", "calls", "tokens"):
+        value = getattr(advisor, attr, None)
+        if isinstance(value, int | float):
+            stats[f"advisor_{attr}"] = value
+    return stats

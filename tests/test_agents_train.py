@@ -1,0 +1,96 @@
+"""Training runs: run folders, checkpoints, Ctrl-C and exact resume, config errors."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+from stable_baselines3 import PPO
+
+from pirl.agents.config import RunConfig
+from pirl.agents.train import train
+from pirl.world.config import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+TEST_CFG = ROOT / "configs" / "test.yaml"
+
+
+def _same_weights(a: Path, b: Path) -> bool:
+    sa = PPO.load(a, device="cpu").policy.state_dict()
+    sb = PPO.load(b, device="cpu").policy.state_dict()
+    return all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+def test_run_folder_contents_and_no_overwrite(tmp_path):
+    cfg = RunConfig.from_yaml(TEST_CFG)
+    out = tmp_path / "run"
+    train("ppo-sr", cfg, out, seed=1, show_progress=False)
+    for name in ("model.zip", "config.yaml", "meta.json", "episodes.csv", "tb", "checkpoints"):
+        assert (out / name).exists(), name
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["complete"] and meta["method"] == "ppo-sr" and meta["timesteps"] == 512
+    assert meta["git_commit"] != ""
+    assert RunConfig.from_yaml(out / "config.yaml") == cfg
+    with pytest.raises(ConfigError, match="already exists"):
+        train("ppo-sr", cfg, out, seed=1, show_progress=False)
+
+
+def test_same_seed_same_model(tmp_path):
+    cfg = RunConfig.from_yaml(TEST_CFG)
+    a = train("ppo-ewri", cfg, tmp_path / "a", seed=3, show_progress=False)
+    b = train("ppo-ewri", cfg, tmp_path / "b", seed=3, show_progress=False)
+    c = train("ppo-ewri", cfg, tmp_path / "c", seed=4, show_progress=False)
+    assert _same_weights(a, b)
+    assert not _same_weights(a, c)
+
+
+def test_ctrl_c_then_resume_matches_an_uninterrupted_run(tmp_path):
+    steps = "6144"
+    cmd = [
+        sys.executable, "-m", "pirl", "train", "--method", "ppo-ewri", "--config",
+        str(TEST_CFG), "--seed", "2", "--steps", steps,
+    ]  # fmt: skip
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen([*cmd, "--out", str(out)], stdout=subprocess.PIPE, text=True)
+    latest = out / "checkpoints" / "LATEST"
+    deadline = time.time() + 240
+    while time.time() < deadline:
+        if latest.exists() and int(latest.read_text().split("_")[1]) >= 1024:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    proc.communicate(timeout=120)
+    assert proc.returncode == 130, "Ctrl-C must stop the run and report the checkpoint"
+    assert not (out / "model.zip").exists()
+    stopped_at = int(latest.read_text().split("_")[1])
+    assert 1024 <= stopped_at < int(steps)
+
+    resumed = subprocess.run([*cmd, "--out", str(out), "--resume"], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    straight = tmp_path / "straight"
+    subprocess.run([*cmd, "--out", str(straight)], check=True, capture_output=True)
+    assert _same_weights(out / "model.zip", straight / "model.zip")
+    rows = (out / "episodes.csv").read_text().splitlines()
+    assert rows == (straight / "episodes.csv").read_text().splitlines()
+
+
+def test_config_errors_name_the_key(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("ppo:\n  n_env: 4\n")
+    with pytest.raises(ConfigError, match="unknown setting 'n_env' in section 'ppo'"):
+        RunConfig.from_yaml(bad)
+    with pytest.raises(ConfigError, match="ppo.n_envs=0"):
+        RunConfig.from_dict({"ppo": {"n_envs": 0}})
+    with pytest.raises(ConfigError, match="pare.mode='later'"):
+        RunConfig.from_dict({"pare": {"mode": "later"}})
+    with pytest.raises(ConfigError, match="does not exist"):
+        train("ppo-sr", RunConfig(), tmp_path / "missing", resume=True, show_progress=False)
+    with pytest.raises(ConfigError, match="PPO methods"):
+        train("ppo", RunConfig(), tmp_path / "x", show_progress=False)
+    assert not (tmp_path / "x").exists()
