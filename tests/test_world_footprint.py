@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from conftest import rel_cells, scenario
 
+from conftest import rel_cells, scenario
 from pirl.world.footprint import PAPER_MAX_HALF
 
 CENTRE = (15, 15)

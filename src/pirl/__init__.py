@@ -3,7 +3,12 @@
 ``import pirl`` registers the Gymnasium environment ``pirl/VCPP-v0``.
 """
 
-import gymnasium as _gym
+from pirl import _numba_cache
+
+# Before any kernel module is imported: numba fixes its cache location at decoration time.
+_numba_cache.configure()
+
+import gymnasium as _gym  # noqa: E402
 
 __version__ = "0.1.0"
 

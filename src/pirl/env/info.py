@@ -85,13 +85,30 @@ class InfoSnapshot:
         return info
 
 
+class _Pending:
+    """Marker kept in a LazyInfo's storage until it is filled (see LazyInfo)."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "<pending>"
+
+
+_PENDING = _Pending()
+
+
 class LazyInfo(dict):
-    """A dict whose VCPP keys appear on first read. ``dict(info)`` gives a plain dict."""
+    """A dict whose VCPP keys appear on first read. ``dict(info)`` gives a plain dict.
+
+    Until filled, the underlying storage holds one private marker, so code that looks at the
+    raw dict size (the C JSON encoder) goes through ``items()``, which fills it first.
+    """
 
     __slots__ = ("_snap", "_e")
 
     def __init__(self, snap: InfoSnapshot, e: int) -> None:
         # dict.__new__ already made an empty dict; skipping dict.__init__ halves the cost.
+        dict.__setitem__(self, _PENDING, None)
         self._snap: InfoSnapshot | None = snap
         self._e = e
 
@@ -103,6 +120,7 @@ class LazyInfo(dict):
         snap = self._snap
         if snap is not None:
             self._snap = None
+            dict.pop(self, _PENDING, None)
             for key, value in snap.info(self._e).items():
                 dict.setdefault(self, key, value)
 
@@ -121,9 +139,36 @@ class LazyInfo(dict):
             self._fill()
         return dict.__contains__(self, key)
 
+    def __delitem__(self, key: Any) -> None:
+        if self._lazy(key):
+            self._fill()
+        dict.__delitem__(self, key)
+
+    def setdefault(self, key: Any, default: Any = None) -> Any:
+        if self._lazy(key):
+            self._fill()
+        return dict.setdefault(self, key, default)
+
+    def pop(self, key: Any, *default: Any) -> Any:
+        if self._lazy(key):
+            self._fill()
+        return dict.pop(self, key, *default)
+
+    def popitem(self) -> tuple[Any, Any]:
+        self._fill()
+        return dict.popitem(self)
+
+    def clear(self) -> None:
+        self._snap = None
+        dict.clear(self)
+
     def __iter__(self):
         self._fill()
         return dict.__iter__(self)
+
+    def __reversed__(self):
+        self._fill()
+        return dict.__reversed__(self)
 
     def __len__(self) -> int:
         self._fill()
@@ -141,20 +186,29 @@ class LazyInfo(dict):
         self._fill()
         return dict.items(self)
 
-    def pop(self, key: Any, *default: Any) -> Any:
-        if self._lazy(key):
-            self._fill()
-        return dict.pop(self, key, *default)
-
     def copy(self) -> dict[str, Any]:
         self._fill()
         return dict(dict.items(self))
+
+    def __or__(self, other: Any) -> dict[str, Any]:
+        return self.copy() | other
+
+    def __ror__(self, other: Any) -> dict[str, Any]:
+        return dict(other) | self.copy()
+
+    def __ior__(self, other: Any) -> LazyInfo:
+        self._fill()
+        dict.update(self, other)
+        return self
 
     def __eq__(self, other: object) -> bool:
         self._fill()
         if isinstance(other, LazyInfo):
             other._fill()
         return dict.__eq__(self, other)
+
+    def __ne__(self, other: object) -> bool:
+        return not self.__eq__(other)
 
     __hash__ = None  # type: ignore[assignment]
 

@@ -128,7 +128,7 @@ class VCPPEnv(gym.Env):
             isinstance(action, np.ndarray) and action.size == 1
         ):
             raise ValueError(f"action must be an integer in [0, 12); got {action!r}")
-        self.core.step(np.array([int(action)], dtype=np.int64))
+        self.core.step(np.asarray(action, dtype=np.int64).reshape(1))
         self.path.append(self.world.position(0))
         return (
             self.core.obs[0].copy(),

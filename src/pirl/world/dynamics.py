@@ -175,7 +175,7 @@ def _step_one(
     terms[e, T_COVERAGE] = new / pf[PF_MAX_FP]
     terms[e, T_REDUNDANT] = 1.0 if redundant else 0.0
     terms[e, T_BATTERY] = used / pf[PF_E_MOVE]
-    terms[e, T_CAM] = 1.0 if (a >= 6 and new > 0) else 0.0
+    terms[e, T_CAM] = 1.0 if (cam_changed and new > 0) else 0.0
     terms[e, T_CURIOSITY] = curiosity
     terms[e, T_COLLISION] = 1.0 if collision else 0.0
     terms[e, T_IDLE] = 1.0 if idle else 0.0

@@ -66,19 +66,25 @@ def _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, out):
 
 @numba.njit(cache=True)
 def _inside(px, py, poly):
-    """Crossing-number point-in-polygon test (any simple polygon)."""
-    inside = False
+    """Whether (px, py) lies in the convex polygon, its edges included.
+
+    Edges count as inside on every side, so a view that is symmetric about the UAV sees a
+    symmetric set of cells (a crossing-number test would keep one edge and drop the other).
+    """
     n = poly.shape[0]
-    j = n - 1
+    area = 0.0
     for i in range(n):
-        xi, yi = poly[i, 0], poly[i, 1]
-        xj, yj = poly[j, 0], poly[j, 1]
-        if (yi > py) != (yj > py):
-            xc = xi + (py - yi) * (xj - xi) / (yj - yi)
-            if px < xc:
-                inside = not inside
-        j = i
-    return inside
+        j = (i + 1) % n
+        area += poly[i, 0] * poly[j, 1] - poly[j, 0] * poly[i, 1]
+    sign = 1.0 if area >= 0.0 else -1.0
+    for i in range(n):
+        j = (i + 1) % n
+        cross = (poly[j, 0] - poly[i, 0]) * (py - poly[i, 1]) - (poly[j, 1] - poly[i, 1]) * (
+            px - poly[i, 0]
+        )
+        if cross * sign < -1e-9:
+            return False
+    return True
 
 
 @numba.njit(cache=True)

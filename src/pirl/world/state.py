@@ -165,13 +165,19 @@ class WorldBatch:
         n = len(scenario.obstacles)
         if n > self.max_obstacles:
             raise ConfigError(f"scenario has {n} obstacles; this world holds {self.max_obstacles}")
+        blocked = blocked_grid(cfg.size, scenario.obstacles)
+        start = tuple(int(v) for v in scenario.start)
+        if len(start) != 3 or not all(0 <= v < s for v, s in zip(start, cfg.size, strict=True)):
+            raise ConfigError(f"scenario start {scenario.start} lies outside the grid {cfg.size}")
+        if blocked[start]:
+            raise ConfigError(f"scenario start {start} lies inside an obstacle")
         self.obstacles[e] = 0.0
         self.obstacles[e, :n] = scenario.obstacles
-        self.blocked[e] = blocked_grid(cfg.size, scenario.obstacles)
+        self.blocked[e] = blocked
         self.coverable[e] = ~self.blocked[e, :, :, 0]
         row = self.ints[e]
         row[:] = 0
-        row[D.PX], row[D.PY], row[D.PZ] = scenario.start
+        row[D.PX], row[D.PY], row[D.PZ] = start
         row[D.TILT], row[D.PAN], row[D.ZOOM] = cfg.start_tilt, cfg.start_pan, cfg.start_zoom10
         row[D.N_OBS] = n
         self.energy[e] = self.capacity

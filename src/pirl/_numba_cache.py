@@ -1,0 +1,55 @@
+"""Where numba keeps compiled kernels: one folder per version of the kernel sources.
+
+numba invalidates a cached kernel only when the file that defines it changes, not when a
+function it calls (in another file) changes. The fused step kernel calls rules from several
+files, so a stale cache could run old rules. Keying the cache folder on a hash of every file
+that holds kernels makes any edit start a fresh cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+from pathlib import Path
+
+_KERNEL_PACKAGES = ("world", "env")
+_KEEP = 3
+
+
+def configure() -> Path | None:
+    """Point numba's cache at ``<base>/<hash of kernel sources>``; returns the folder."""
+    import numba
+
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for package in _KERNEL_PACKAGES:
+        for path in sorted((root / package).glob("*.py")):
+            digest.update(path.name.encode())
+            digest.update(path.read_bytes())
+    base = Path(
+        os.environ.get("PIRL_NUMBA_CACHE")
+        or Path(os.environ.get("PIRL_CACHE_DIR", Path.home() / ".cache" / "pirl")) / "numba"
+    )
+    folder = base / digest.hexdigest()[:16]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None  # read-only home: numba falls back to compiling in memory
+    numba.config.CACHE_DIR = str(folder)
+    _prune(base, folder)
+    return folder
+
+
+def _prune(base: Path, current: Path) -> None:
+    """Keep the few most recently used cache folders."""
+    try:
+        folders = sorted(
+            (p for p in base.iterdir() if p.is_dir() and p != current),
+            key=lambda p: p.stat().st_mtime,
+            reverse=True,
+        )
+    except OSError:
+        return
+    for old in folders[_KEEP - 1 :]:
+        shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,122 @@
+"""Imitation learning (the paper's IL baseline): TabNet trained on PPO-EWRI's choices.
+
+Expert transitions are collected on the training world (15x15x3 by default) from a finished
+PPO run acting deterministically; the features are the environment's observation vector read
+as a table (one column per value); the label is the expert's action. A ``pytorch-tabnet``
+``TabNetClassifier`` is fitted with a validation split and early stopping; its validation
+accuracy is written to ``il_stats.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+from pirl.agents.config import RunConfig
+from pirl.agents.train import git_commit, prepare_run_folder, train_seed_base, write_json
+from pirl.env.vec_env import make_vec_env
+from pirl.world.config import ConfigError
+
+TABNET_FILE = "tabnet.zip"
+
+
+def collect_expert(
+    expert_run: Path, cfg: RunConfig, transitions: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(observations, actions) of the expert acting deterministically on the training world."""
+    from stable_baselines3 import PPO
+
+    model_path = Path(expert_run) / "model.zip"
+    if not model_path.is_file():
+        raise ConfigError(f"expert run {expert_run} has no model.zip (is it finished?)")
+    model = PPO.load(model_path, device="cpu")
+    venv = make_vec_env(
+        cfg.ppo.n_envs, seed=train_seed_base(seed) + 500, config=cfg.env.replace(reward="ewri")
+    )
+    obs = venv.reset()
+    xs, ys = [], []
+    while sum(len(x) for x in xs) < transitions:
+        actions, _ = model.predict(obs, deterministic=True)
+        xs.append(obs.copy())
+        ys.append(np.asarray(actions, dtype=np.int64))
+        obs, _, _, _ = venv.step(actions)
+    return np.concatenate(xs)[:transitions], np.concatenate(ys)[:transitions]
+
+
+def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: bool = False) -> Path:
+    """Collect expert data, fit TabNet, save it in run folder ``out``; returns the model file."""
+    from pytorch_tabnet.tab_model import TabNetClassifier
+
+    out, expert = Path(out), Path(expert)
+    if resume and (out / TABNET_FILE).is_file():
+        return out / TABNET_FILE
+    expert_meta = _read_meta(expert)
+    if expert_meta.get("method") not in ("ppo-ewri", "ppo-sr", "pirl"):
+        raise ConfigError(f"expert {expert} is not a finished PPO run")
+    if resume:
+        out.mkdir(parents=True, exist_ok=True)
+    else:
+        prepare_run_folder(out, resume=False)
+    torch.set_num_threads(cfg.ppo.torch_threads)
+    (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    il = cfg.il
+    x, y = collect_expert(expert, cfg, il.expert_steps, seed)
+    order = np.random.default_rng(seed).permutation(len(x))
+    n_valid = max(1, int(len(x) * il.valid_fraction))
+    valid, fit = order[:n_valid], order[n_valid:]
+    x_fit, y_fit = x[fit], y[fit]
+    known = np.isin(y[valid], np.unique(y_fit))  # TabNet cannot score classes it never saw
+    x_valid, y_valid = x[valid][known], y[valid][known]
+
+    clf = TabNetClassifier(seed=seed, verbose=0, device_name="cpu")
+    clf.fit(
+        x_fit,
+        y_fit,
+        eval_set=[(x_valid, y_valid)],
+        eval_name=["valid"],
+        eval_metric=["accuracy"],
+        max_epochs=il.max_epochs,
+        patience=il.patience,
+        batch_size=min(il.batch_size, len(x_fit)),
+        virtual_batch_size=min(128, il.batch_size, len(x_fit)),
+        drop_last=False,
+    )
+    accuracy = float((clf.predict(x_valid) == y_valid).mean()) if len(y_valid) else 0.0
+    tmp = out / "tabnet.tmp"
+    saved = Path(clf.save_model(str(tmp)))
+    os.replace(saved, out / TABNET_FILE)
+    shutil.rmtree(tmp, ignore_errors=True)
+    stats = {
+        "valid_accuracy": accuracy,
+        "train_rows": len(x_fit),
+        "valid_rows": len(x_valid),
+        "best_epoch": int(getattr(clf, "best_epoch", -1)),
+        "action_counts": np.bincount(y, minlength=12).tolist(),
+        "expert": str(expert),
+    }
+    write_json(out / "il_stats.json", stats)
+    write_json(
+        out / "meta.json",
+        {
+            "method": "il",
+            "seed": seed,
+            "git_commit": git_commit(),
+            "expert": str(expert),
+            "complete": True,
+            "valid_accuracy": accuracy,
+        },
+    )
+    return out / TABNET_FILE
+
+
+def _read_meta(run: Path) -> dict:
+    path = Path(run) / "meta.json"
+    if not path.is_file():
+        raise ConfigError(f"{run} is not a run folder (no meta.json)")
+    return json.loads(path.read_text())
