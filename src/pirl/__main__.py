@@ -1,5 +1,5 @@
 """``python -m pirl`` runs the command line."""
 
-from pirl.cli import app
+from pirl.cli import main
 
-app(prog_name="pirl")
+main()

@@ -120,8 +120,30 @@ def demo(
     console.print(_metrics_table(rows, f"30x30x3, seed {seed}, paper footprint"))
 
 
-def main() -> None:  # pragma: no cover - console entry point
-    app()
+MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")
+
+
+def expand_multi_values(argv: list[str]) -> list[str]:
+    """Let list options take several values after one flag, as users write them:
+    ``--sizes 30 45 60`` becomes ``--sizes 30 --sizes 45 --sizes 60``."""
+    out: list[str] = []
+    current: str | None = None
+    for arg in argv:
+        if arg.startswith("-"):
+            current = arg if arg in MULTI_VALUE_OPTIONS else None
+            out.append(arg)
+        elif current is not None and out[-1] != current:
+            out += [current, arg]
+        else:
+            out.append(arg)
+    return out
+
+
+def main() -> None:
+    """Console entry point."""
+    import sys
+
+    app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
 
 
 @app.command()
@@ -163,3 +185,80 @@ def train(
         err.print(f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume")
         raise typer.Exit(130) from None
     console.print(f"done: {result}")
+
+
+@app.command()
+@_clean_errors
+def evaluate(
+    runs: Annotated[
+        list[Path] | None, typer.Option(help="Finished run folders (repeat or space-separate).")
+    ] = None,
+    methods: Annotated[
+        list[str] | None, typer.Option(help="Built-in methods: boustrophedon, llm-only, random.")
+    ] = None,
+    sizes: Annotated[list[str] | None, typer.Option(help="30, 45, 60 or XxYxZ.")] = None,
+    episodes: Annotated[int, typer.Option(help="Scenarios per size.")] = 100,
+    sim: Annotated[list[str] | None, typer.Option(help="Simulator(s): grid.")] = None,
+    out: Annotated[Path, typer.Option(help="Results folder.")] = Path("results/eval"),
+    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
+    config: Annotated[
+        Path | None, typer.Option(help="Preset whose env section defines the scenarios.")
+    ] = None,
+    advisor: Annotated[str, typer.Option(help="Advisor of llm-only: local, openai, oracle.")] = (
+        "local"
+    ),
+) -> None:
+    """Evaluate trained runs and built-in methods on the same scenarios of each size."""
+    from rich.progress import Progress
+
+    from pirl.agents.config import RunConfig
+    from pirl.evaluate.runner import EvalPlan, spec_for_builtin, spec_for_run
+    from pirl.evaluate.runner import evaluate as run_evaluation
+    from pirl.evaluate.scenarios import parse_size
+
+    if episodes < 1:
+        raise ConfigError(f"--episodes {episodes}: must be >= 1")
+    run_list = _split_paths(runs or [])
+    if config is not None:
+        cfg = RunConfig.from_yaml(config)
+    elif run_list and (run_list[0] / "config.yaml").is_file():
+        cfg = RunConfig.from_yaml(run_list[0] / "config.yaml")
+    else:
+        cfg = RunConfig()
+    specs = [spec_for_run(r) for r in run_list]
+    specs += [spec_for_builtin(m, advisor) for m in _split_words(methods or [])]
+    plan = EvalPlan(
+        specs=specs,
+        sizes=[parse_size(s) for s in _split_words(sizes or ["30", "45", "60"])],
+        episodes=episodes,
+        sims=_split_words(sim or ["grid"]),
+        env=cfg.env,
+        config=cfg,
+    )
+    with Progress(console=console, transient=True) as bar:
+        task = bar.add_task("episodes", total=None)
+        summary = run_evaluation(
+            plan, out, workers, progress=lambda d, t: bar.update(task, completed=d, total=t)
+        )
+    console.print(_summary_table(summary))
+    console.print(f"wrote {out / 'episodes.jsonl'} and {summary}")
+
+
+def _split_words(values: list[str]) -> list[str]:
+    return [w for v in values for w in str(v).replace(",", " ").split()]
+
+
+def _split_paths(values: list[Path]) -> list[Path]:
+    return [Path(w) for w in _split_words([str(v) for v in values])]
+
+
+def _summary_table(path: Path) -> Table:
+    from pirl.evaluate.summary import read_summary
+
+    table = Table(title=str(path))
+    for col in ("method", "sim", "size", "n", "VCR", "BE", "RVC"):
+        table.add_column(col)
+    for row in read_summary(path):
+        cells = [f"{row[m + '_mean']:.3f} ± {row[m + '_ci95']:.3f}" for m in ("vcr", "be", "rvc")]
+        table.add_row(row["label"], row["sim"], row["size"], str(int(row["n"])), *cells)
+    return table

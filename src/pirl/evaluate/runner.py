@@ -1,0 +1,234 @@
+"""Run every method on every scenario of every size, in parallel worker processes.
+
+``evaluate()`` is what ``pirl evaluate`` calls. Each (method, size) pair is cut into chunks of
+scenario seeds; a worker loads the method's policy once and plays its chunk. Records are
+sorted before writing, so the output does not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pirl.agents.config import RunConfig
+from pirl.agents.loading import BUILTIN, LABELS, run_method
+from pirl.evaluate.scenarios import scenario_seeds, size_name
+from pirl.evaluate.summary import write_summary
+from pirl.world.config import ConfigError, VCPPConfig
+
+SIMS = ("grid",)
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One method to evaluate: a finished run folder or a built-in method."""
+
+    key: str
+    label: str
+    source: str
+    train_seed: int | None = None
+    advisor: str | None = None
+
+
+def spec_for_run(run: Path) -> MethodSpec:
+    """The spec of a finished run; PIRL runs are keyed by their advisor (oracle is labelled)."""
+    method = run_method(run)
+    meta = json.loads((Path(run) / "meta.json").read_text())
+    key, label = method, LABELS.get(method, method)
+    advisor = meta.get("advisor") or ""
+    if method == "pirl" and "oracle" in advisor:
+        key, label = "pirl-oracle", "PIRL (oracle advisor, not an LLM)"
+    return MethodSpec(key, label, str(run), meta.get("seed"), None)
+
+
+def spec_for_builtin(name: str, advisor: str | None = None) -> MethodSpec:
+    if name not in BUILTIN:
+        raise ConfigError(f"method {name!r}: built-in methods are {', '.join(BUILTIN)}")
+    label = LABELS[name]
+    if name != "llm-only":
+        return MethodSpec(name, label, name)
+    if name == "llm-only":
+        advisor = advisor or "local"
+        label = f"LLM-only ({advisor})" if advisor != "oracle" else "LLM-only (oracle, not an LLM)"
+    return MethodSpec(name, label, name, None, advisor)
+
+
+@dataclass
+class EvalPlan:
+    """What to evaluate and how."""
+
+    specs: list[MethodSpec]
+    sizes: list[tuple[int, int, int]]
+    episodes: int
+    sims: list[str] = field(default_factory=lambda: ["grid"])
+    env: VCPPConfig = field(default_factory=VCPPConfig)
+    config: RunConfig = field(default_factory=RunConfig)
+    episodes_per_method: dict[str, int] = field(default_factory=dict)
+
+
+# -- worker side ---------------------------------------------------------------------------
+_POLICIES: dict[tuple, Any] = {}
+
+
+def _policy(spec: MethodSpec, config: RunConfig) -> Any:
+    from pirl.agents.loading import load_policy
+
+    cache_key = (spec.key, spec.source, spec.advisor)
+    if cache_key not in _POLICIES:
+        advisor = None
+        if spec.advisor is not None:
+            from pirl.advice.factory import make_advisor
+
+            advisor = make_advisor(spec.advisor, config)
+        _POLICIES[cache_key] = load_policy(spec.source, advisor=advisor, seed=0)
+    return _POLICIES[cache_key]
+
+
+def run_chunk(
+    spec: MethodSpec,
+    env_dict: dict[str, Any],
+    config_dict: dict[str, Any],
+    size: tuple[int, int, int],
+    sim: str,
+    seeds: list[int],
+) -> list[dict[str, Any]]:
+    """Play ``spec`` on each seed of ``size``; one record per episode."""
+    import torch
+
+    from pirl.env.vcpp_env import VCPPEnv
+    from pirl.evaluate.rollout import run_episode
+
+    torch.set_num_threads(1)
+    config = RunConfig.from_dict(config_dict)
+    env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size))
+    policy = _policy(spec, config)
+    env = VCPPEnv(env_cfg)
+    records = []
+    for seed in seeds:
+        calls_before = getattr(policy, "calls", 0)
+        result = run_episode(env, policy, seed)
+        records.append(
+            {
+                "method": spec.key,
+                "label": spec.label,
+                "sim": sim,
+                "size": size_name(size),
+                "seed": seed,
+                "train_seed": spec.train_seed,
+                "source": spec.source,
+                **result.metrics,
+                "llm_calls": getattr(policy, "calls", 0) - calls_before,
+            }
+        )
+    return records
+
+
+# -- driver side ---------------------------------------------------------------------------
+def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
+    tasks = []
+    for spec in plan.specs:
+        episodes = plan.episodes_per_method.get(spec.key, plan.episodes)
+        for sim in plan.sims:
+            for size in plan.sizes:
+                seeds = scenario_seeds(size, episodes)
+                chunk = max(1, math.ceil(len(seeds) / max(1, 2 * workers)))
+                for i in range(0, len(seeds), chunk):
+                    tasks.append((spec, size, sim, seeds[i : i + chunk]))
+    return tasks
+
+
+def evaluate(
+    plan: EvalPlan,
+    out: Path,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+    executor_factory: Callable[[int], Any] | None = None,
+) -> Path:
+    """Run the plan; write ``episodes.jsonl`` and ``summary.csv`` into ``out``."""
+    for sim in plan.sims:
+        if sim not in SIMS:
+            raise ConfigError(f"--sim {sim!r}: available simulators are {', '.join(SIMS)}")
+    if not plan.specs:
+        raise ConfigError("nothing to evaluate: give --runs and/or --methods")
+    _check_observations(plan)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = _tasks(plan, workers)
+    total = sum(len(t[3]) for t in tasks)
+    env_dict, config_dict = plan.env.to_dict(), plan.config.to_dict()
+    records: list[dict[str, Any]] = []
+    done = 0
+    if workers <= 1 and executor_factory is None:
+        for spec, size, sim, seeds in tasks:
+            records += run_chunk(spec, env_dict, config_dict, size, sim, seeds)
+            done += len(seeds)
+            if progress:
+                progress(done, total)
+    else:
+        factory = executor_factory or _process_pool
+        with factory(workers) as pool:
+            futures = {
+                pool.submit(run_chunk, spec, env_dict, config_dict, size, sim, seeds): len(seeds)
+                for spec, size, sim, seeds in tasks
+            }
+            for future in as_completed(futures):
+                records += future.result()
+                done += futures[future]
+                if progress:
+                    progress(done, total)
+    records.sort(key=lambda r: (r["method"], r["sim"], r["size"], str(r["source"]), r["seed"]))
+    _write_jsonl(out / "episodes.jsonl", records)
+    write_summary(records, out / "summary.csv")
+    (out / "plan.json").write_text(
+        json.dumps(
+            {
+                "specs": [asdict(s) for s in plan.specs],
+                "sizes": [size_name(s) for s in plan.sizes],
+                "episodes": plan.episodes,
+                "episodes_per_method": plan.episodes_per_method,
+                "sims": plan.sims,
+                "env": env_dict,
+            },
+            indent=2,
+        )
+    )
+    return out / "summary.csv"
+
+
+def _process_pool(workers: int) -> ProcessPoolExecutor:
+    # spawn: workers must not inherit the parent's threads (torch, an LLM, numba).
+    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+
+
+def _check_observations(plan: EvalPlan) -> None:
+    """A trained policy needs the observation layout it was trained with."""
+    import yaml
+
+    for spec in plan.specs:
+        if spec.source in BUILTIN:
+            continue
+        cfg_path = Path(spec.source) / "config.yaml"
+        if not cfg_path.is_file():
+            continue
+        trained = (yaml.safe_load(cfg_path.read_text()) or {}).get("env", {})
+        for key in ("obs_window", "obs_global"):
+            if key in trained and trained[key] != getattr(plan.env, key):
+                raise ConfigError(
+                    f"{spec.source} was trained with {key}={trained[key]}, "
+                    f"the evaluation uses {getattr(plan.env, key)}"
+                )
+
+
+def _write_jsonl(path: Path, records: Iterable[dict[str, Any]]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as fh:
+        for record in records:
+            fh.write(json.dumps(record, sort_keys=True) + "\n")
+    os.replace(tmp, path)
