@@ -98,52 +98,65 @@ def render(
 
 @app.command()
 @_clean_errors
-def demo(
-    out: Annotated[Path, typer.Option(help="Folder for the demo's outputs.")] = Path(
-        "results/demo"
+def reproduce(
+    profile: Annotated[str, typer.Option(help="quick (the demo) or paper (full budgets).")] = (
+        "quick"
     ),
-    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
+    advisor: Annotated[str, typer.Option(help="PIRL's advisor: local, openai or oracle.")] = (
+        "local"
+    ),
+    seeds: Annotated[list[int] | None, typer.Option(help="Training seeds per method.")] = None,
+    workers: Annotated[int | None, typer.Option(help="Evaluation worker processes.")] = None,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default results/<profile>).")] = (
+        None
+    ),
+    config: Annotated[
+        Path | None, typer.Option(help="A preset file instead of configs/<profile>.yaml.")
+    ] = None,
 ) -> None:
-    """The main job on the embedded defaults (for now: planner baselines on 30x30x3)."""
-    from pirl.env import VCPPEnv
-    from pirl.evaluate import run_episode, save_gif
+    """Train every method not yet trained in --out, evaluate all of them, write the report."""
+    from rich.progress import Progress
 
-    cfg = VCPPConfig(size=(30, 30, 3))
-    rows = []
-    for name in ("boustrophedon", "random"):
-        env = VCPPEnv(cfg, render_mode="rgb_array")
-        result = run_episode(env, _make_policy(name, seed), seed, record=name == "boustrophedon")
-        rows.append((name, result.metrics))
-        if result.frames:
-            gif = save_gif(result.frames, out / f"{name}.gif")
-            console.print(f"wrote {gif}")
-    console.print(_metrics_table(rows, f"30x30x3, seed {seed}, paper footprint"))
+    from pirl.agents.config import RunConfig
+    from pirl.evaluate.reproduce import reproduce as run_reproduce
 
+    path = config or _preset(profile)
+    cfg = RunConfig.from_yaml(path)
+    if seeds:
+        cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
+    out = out or Path("results") / profile
+    console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
+    with Progress(console=console, transient=True) as bar:
+        task = bar.add_task("evaluation episodes", total=None, visible=False)
 
-MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total, visible=True)
 
-
-def expand_multi_values(argv: list[str]) -> list[str]:
-    """Let list options take several values after one flag, as users write them:
-    ``--sizes 30 45 60`` becomes ``--sizes 30 --sizes 45 --sizes 60``."""
-    out: list[str] = []
-    current: str | None = None
-    for arg in argv:
-        if arg.startswith("-"):
-            current = arg if arg in MULTI_VALUE_OPTIONS else None
-            out.append(arg)
-        elif current is not None and out[-1] != current:
-            out += [current, arg]
-        else:
-            out.append(arg)
-    return out
+        report = run_reproduce(
+            cfg, out, advisor, workers, log=lambda m: console.print(m), progress=progress
+        )
+    console.print(f"[bold]report:[/] {report}")
+    console.print(f"tables: {report.parent / 'table.md'}")
 
 
-def main() -> None:
-    """Console entry point."""
-    import sys
+def _preset(profile: str) -> Path:
+    here = Path("configs") / f"{profile}.yaml"
+    if here.is_file():
+        return here
+    bundled = Path(__file__).resolve().parents[2] / "configs" / f"{profile}.yaml"
+    if bundled.is_file():
+        return bundled
+    raise ConfigError(f"--profile {profile!r}: no configs/{profile}.yaml (try quick or paper)")
 
-    app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
+
+@app.command()
+@_clean_errors
+def demo(
+    out: Annotated[Path, typer.Option(help="Output folder.")] = Path("results/quick"),
+    advisor: Annotated[str, typer.Option(help="PIRL's advisor.")] = "local",
+) -> None:
+    """The main job on the embedded defaults: ``pirl reproduce --profile quick``."""
+    reproduce(profile="quick", advisor=advisor, seeds=None, workers=None, out=out, config=None)
 
 
 @app.command()
@@ -262,3 +275,29 @@ def _summary_table(path: Path) -> Table:
         cells = [f"{row[m + '_mean']:.3f} ± {row[m + '_ci95']:.3f}" for m in ("vcr", "be", "rvc")]
         table.add_row(row["label"], row["sim"], row["size"], str(int(row["n"])), *cells)
     return table
+
+
+MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")
+
+
+def expand_multi_values(argv: list[str]) -> list[str]:
+    """Let list options take several values after one flag, as users write them:
+    ``--sizes 30 45 60`` becomes ``--sizes 30 --sizes 45 --sizes 60``."""
+    out: list[str] = []
+    current: str | None = None
+    for arg in argv:
+        if arg.startswith("-"):
+            current = arg if arg in MULTI_VALUE_OPTIONS else None
+            out.append(arg)
+        elif current is not None and out[-1] != current:
+            out += [current, arg]
+        else:
+            out.append(arg)
+    return out
+
+
+def main() -> None:
+    """Console entry point."""
+    import sys
+
+    app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")

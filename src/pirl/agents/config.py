@@ -134,12 +134,35 @@ class ILSettings:
     """TabNet batch size."""
 
 
+@dataclass(frozen=True)
+class ReproduceSettings:
+    """What ``pirl reproduce`` trains and evaluates."""
+
+    seeds: tuple[int, ...] = (0,)
+    """Training seeds per method; their episodes pool into the confidence intervals."""
+    sizes: tuple[str, ...] = ("30", "45", "60")
+    """Evaluation worlds (N for NxNx3, or XxYxZ)."""
+    episodes: int = 100
+    """Scenarios per size for every method."""
+    llm_only_episodes: int = 100
+    """Scenarios per size for LLM-only (it calls the LLM every few steps, so it is slow)."""
+    llm_only_max_calls: int = 0
+    """LLM calls allowed per LLM-only episode (0 = no limit); after that it holds still."""
+    oracle_pirl: bool = True
+    """Also train PIRL with the oracle advisor (a labelled extra, not an LLM)."""
+    workers: int = 2
+    """Evaluation worker processes."""
+    gif_every: int = 2
+    """Record every n-th frame of the report's animations."""
+
+
 _SECTIONS = {
     "ppo": PPOSettings,
     "train": TrainSettings,
     "pare": PareSettings,
     "advisor": AdvisorSettings,
     "il": ILSettings,
+    "reproduce": ReproduceSettings,
 }
 
 
@@ -153,6 +176,7 @@ class RunConfig:
     pare: PareSettings = field(default_factory=PareSettings)
     advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
     il: ILSettings = field(default_factory=ILSettings)
+    reproduce: ReproduceSettings = field(default_factory=ReproduceSettings)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -221,6 +245,9 @@ def _validate(cfg: RunConfig) -> None:
         "train.checkpoint_every": t.checkpoint_every, "pare.query_every": pare.query_every,
         "pare.timeout_s": pare.timeout_s, "il.expert_steps": cfg.il.expert_steps,
         "il.max_epochs": cfg.il.max_epochs, "il.batch_size": cfg.il.batch_size,
+        "reproduce.episodes": cfg.reproduce.episodes,
+        "reproduce.llm_only_episodes": cfg.reproduce.llm_only_episodes,
+        "reproduce.workers": cfg.reproduce.workers, "reproduce.gif_every": cfg.reproduce.gif_every,
     }  # fmt: skip
     for key, value in positive.items():
         if value <= 0:
@@ -238,5 +265,7 @@ def _validate(cfg: RunConfig) -> None:
         raise ConfigError(f"il.valid_fraction={cfg.il.valid_fraction!r}: must be in (0, 1)")
     if not all(isinstance(n, int) and n > 0 for n in p.net_arch):
         raise ConfigError(f"ppo.net_arch={list(p.net_arch)!r}: must be positive layer sizes")
+    if not cfg.reproduce.seeds or not all(isinstance(v, int) for v in cfg.reproduce.seeds):
+        raise ConfigError("reproduce.seeds must be a non-empty list of integers")
     if not 0 < p.gamma <= 1 or not 0 < p.gae_lambda <= 1:
         raise ConfigError("ppo.gamma and ppo.gae_lambda must be in (0, 1]")

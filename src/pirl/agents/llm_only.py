@@ -4,7 +4,8 @@ Each answer becomes a queue of atomic actions, camera first (tilt, pan, zoom ste
 advised values, snapped to the camera grid), then the move (x, then y, then z). The advisor is
 asked again when the queue is empty. An answer that fails or cannot be parsed, or asks for
 nothing to change, yields one hover step (a camera action that changes nothing) and a new
-question next step; such answers are counted.
+question next step; such answers are counted. With ``max_calls`` the advisor is asked at most
+that many times per episode; after that the UAV holds still (a budget for slow LLMs).
 """
 
 from __future__ import annotations
@@ -49,9 +50,11 @@ class LLMOnlyPolicy(Policy):
 
     name = "llm-only"
 
-    def __init__(self, advisor: Advisor, prompt_variant: str = "paper") -> None:
+    def __init__(self, advisor: Advisor, prompt_variant: str = "paper", max_calls: int = 0) -> None:
         self.advisor = advisor
         self.prompt_variant = prompt_variant
+        self.max_calls = max_calls
+        self.episode_calls = 0
         self.label = f"LLM-only ({advisor.label})"
         self.queue: list[int] = []
         self.calls = 0
@@ -61,9 +64,12 @@ class LLMOnlyPolicy(Policy):
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         self.world, self.e = world, index
         self.queue = []
+        self.episode_calls = 0
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        if not self.queue:
+        budget_left = not self.max_calls or self.episode_calls < self.max_calls
+        if not self.queue and budget_left:
+            self.episode_calls += 1
             prompt = build_prompt(prompt_state(self.world, self.e), self.prompt_variant)
             self.calls += 1
             if getattr(self.advisor, "needs_context", False):

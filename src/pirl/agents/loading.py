@@ -66,11 +66,16 @@ def run_method(run: Path) -> str:
 
 
 def load_policy(
-    source: str | Path, advisor: Any | None = None, seed: int | None = None, device: str = "cpu"
+    source: str | Path,
+    advisor: Any | None = None,
+    seed: int | None = None,
+    device: str = "cpu",
+    max_calls: int = 0,
 ) -> Policy:
     """A policy from a run folder (PPO methods, IL) or a built-in method name.
 
-    Built-ins: ``boustrophedon``, ``random`` and ``llm-only`` (which needs ``advisor``).
+    Built-ins: ``boustrophedon``, ``random`` and ``llm-only`` (which needs ``advisor``;
+    ``max_calls`` limits its LLM calls per episode, 0 = no limit).
     """
     if str(source) in BUILTIN:
         name = str(source)
@@ -84,7 +89,7 @@ def load_policy(
             raise ConfigError("llm-only needs an advisor")
         from pirl.agents.llm_only import LLMOnlyPolicy
 
-        return LLMOnlyPolicy(advisor)
+        return LLMOnlyPolicy(advisor, max_calls=max_calls)
     run = Path(source)
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")

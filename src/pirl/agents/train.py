@@ -148,7 +148,7 @@ def pick_device(setting: str) -> str:
     return setting
 
 
-def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path) -> PPO:
+def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path | None) -> PPO:
     """SB3 PPO with separate MLPs for actor and critic (the observation is a flat vector of
     local maps, a coarse global map and scalars, so an MLP reads it directly)."""
     p = cfg.ppo
@@ -168,7 +168,7 @@ def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path) -> PPO:
         vf_coef=p.vf_coef,
         max_grad_norm=p.max_grad_norm,
         policy_kwargs={"net_arch": {"pi": list(p.net_arch), "vf": list(p.net_arch)}},
-        tensorboard_log=str(tb_dir),
+        tensorboard_log=str(tb_dir) if tb_dir is not None else None,
         seed=seed,
         device=pick_device(p.device),
         verbose=0,

@@ -35,6 +35,7 @@ class MethodSpec:
     source: str
     train_seed: int | None = None
     advisor: str | None = None
+    max_calls: int = 0
 
 
 def spec_for_run(run: Path) -> MethodSpec:
@@ -48,7 +49,7 @@ def spec_for_run(run: Path) -> MethodSpec:
     return MethodSpec(key, label, str(run), meta.get("seed"), None)
 
 
-def spec_for_builtin(name: str, advisor: str | None = None) -> MethodSpec:
+def spec_for_builtin(name: str, advisor: str | None = None, max_calls: int = 0) -> MethodSpec:
     if name not in BUILTIN:
         raise ConfigError(f"method {name!r}: built-in methods are {', '.join(BUILTIN)}")
     label = LABELS[name]
@@ -57,7 +58,9 @@ def spec_for_builtin(name: str, advisor: str | None = None) -> MethodSpec:
     if name == "llm-only":
         advisor = advisor or "local"
         label = f"LLM-only ({advisor})" if advisor != "oracle" else "LLM-only (oracle, not an LLM)"
-    return MethodSpec(name, label, name, None, advisor)
+    if max_calls:
+        label += f", at most {max_calls} calls per episode"
+    return MethodSpec(name, label, name, None, advisor, max_calls)
 
 
 @dataclass
@@ -87,7 +90,9 @@ def _policy(spec: MethodSpec, config: RunConfig) -> Any:
             from pirl.advice.factory import make_advisor
 
             advisor = make_advisor(spec.advisor, config)
-        _POLICIES[cache_key] = load_policy(spec.source, advisor=advisor, seed=0)
+        _POLICIES[cache_key] = load_policy(
+            spec.source, advisor=advisor, seed=0, max_calls=spec.max_calls
+        )
     return _POLICIES[cache_key]
 
 

@@ -29,13 +29,19 @@ def alignment_arrays(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Batched terms: positions (N, 3), camera (N, 3) as (tilt, pan, zoom), advice (N, 6) as
     (pan, tilt, zoom, dx, dy, dz). Returns ``dir_align, pos_align, move, cam``, each (N,)."""
+    p_t = np.asarray(p_t, dtype=np.float64)
+    p_next = np.asarray(p_next, dtype=np.float64)
+    cam_next = np.asarray(cam_next, dtype=np.float64)
+    rec = np.asarray(rec, dtype=np.float64)
     dp = p_next - p_t
     dq = rec[:, 3:6]
     norms = np.linalg.norm(dp, axis=1) * np.linalg.norm(dq, axis=1)
     dots = (dp * dq).sum(axis=1)
     dir_align = np.divide(dots, norms, out=np.zeros_like(dots), where=norms > 0)
     d_max = float(np.linalg.norm(np.asarray(size, dtype=np.float64) - 1.0))
-    pos_align = 1.0 - np.linalg.norm(p_next - (p_t + dq), axis=1) / d_max
+    miss = np.linalg.norm(p_next - (p_t + dq), axis=1)
+    # A 1x1x1 grid has d_max = 0: the advised cell is either reached (1) or not (0).
+    pos_align = 1.0 - miss / d_max if d_max > 0 else (miss == 0.0).astype(np.float64)
     move = alpha * dir_align + (1.0 - alpha) * pos_align
     cam = (
         -(

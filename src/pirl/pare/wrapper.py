@@ -35,6 +35,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
 from pirl.advice.base import Advisor, Answer
+from pirl.advice.factory import exhausted
 from pirl.advice.prompt import build_prompt
 from pirl.env.rewards import LLM_INDEX
 from pirl.env.vec_env import VCPPVecEnv
@@ -150,8 +151,8 @@ class PAREVecEnv(VecEnvWrapper):
     # -- requests -------------------------------------------------------------------------
     def _submit(self, worlds: np.ndarray) -> None:
         """Send the prompts of ``worlds`` (their current state) as one batch."""
-        if not worlds.size or getattr(self.advisor, "exhausted", False):
-            self.stats.budget_exhausted = bool(getattr(self.advisor, "exhausted", False))
+        if not worlds.size or exhausted(self.advisor):
+            self.stats.budget_exhausted = exhausted(self.advisor)
             return
         w = self._world
         prompts = [
@@ -286,7 +287,7 @@ class PAREVecEnv(VecEnvWrapper):
         s.steps_stale += int((status == _STALE).sum())
         s.steps_missing += int((status == _MISSING).sum())
         s.staleness_sum += int(staleness[status != _MISSING].sum())
-        s.budget_exhausted = bool(getattr(self.advisor, "exhausted", False))
+        s.budget_exhausted = exhausted(self.advisor)
 
     def _drain(self) -> None:
         if self._job is not None:

@@ -1,0 +1,149 @@
+"""PPO training throughput and where the time goes.
+
+Prints, in one run on the same machine:
+
+1. PPO training steps/s on 15x15x3 with ``make_vec_env`` (batched numpy worlds) against SB3's
+   ``DummyVecEnv`` and ``SubprocVecEnv`` over single ``VCPPEnv``s (same PPO settings);
+2. PIRL (PARE with an advisor, async by default) against PPO-EWRI;
+3. the share of wall time spent stepping environments, in policy inference (rollout time
+   minus env time), in PPO updates and waiting for / preparing advice.
+
+Usage: ``python benchmarks/train_throughput.py [--steps 16384] [--envs 16]
+[--advisor local|oracle] [--mode async|sync]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecMonitor
+
+from pirl.agents.config import RunConfig
+from pirl.agents.train import build_env_stack, build_ppo
+from pirl.env import VCPPEnv, make_vec_env
+
+
+class StepTimer(VecEnvWrapper):
+    """Measures time spent inside the wrapped env's step."""
+
+    def __init__(self, venv):
+        super().__init__(venv)
+        self.seconds = 0.0
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_async(self, actions):
+        self._t = time.perf_counter()
+        self.venv.step_async(actions)
+
+    def step_wait(self):
+        out = self.venv.step_wait()
+        self.seconds += time.perf_counter() - self._t
+        return out
+
+
+def timed_learn(model: PPO, steps: int) -> dict[str, float]:
+    """Train for ``steps``; returns wall time and the time inside PPO updates."""
+    update = {"s": 0.0}
+    original = model.train
+
+    def train_timed() -> None:
+        start = time.perf_counter()
+        original()
+        update["s"] += time.perf_counter() - start
+
+    model.train = train_timed
+    start = time.perf_counter()
+    model.learn(total_timesteps=steps)
+    return {"wall": time.perf_counter() - start, "update": update["s"]}
+
+
+def _ppo(env, cfg: RunConfig) -> PPO:
+    return build_ppo(env, cfg, seed=0, tb_dir=None)
+
+
+def run_case(name: str, env, cfg: RunConfig, steps: int, pare=None) -> dict[str, float]:
+    timer = StepTimer(env)
+    model = _ppo(VecMonitor(timer), cfg)
+    model.tensorboard_log = None
+    t = timed_learn(model, steps)
+    env_s = timer.seconds
+    advice_s = pare.stats.wait_s if pare is not None else 0.0
+    rollout_s = t["wall"] - t["update"]
+    return {
+        "name": name,
+        "sps": steps / t["wall"],
+        "env": env_s - advice_s,
+        "inference": rollout_s - env_s,
+        "update": t["update"],
+        "advice": advice_s,
+        "wall": t["wall"],
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=16_384)
+    parser.add_argument("--envs", type=int, default=16)
+    parser.add_argument("--advisor", default="local", choices=("local", "oracle"))
+    parser.add_argument("--mode", default="async", choices=("async", "sync"))
+    parser.add_argument("--config", default="configs/quick.yaml")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    cfg = RunConfig.from_yaml(args.config).with_overrides(
+        ppo={"n_envs": args.envs}, pare={"advisor": args.advisor, "mode": args.mode}
+    )
+    env_cfg = cfg.env.replace(reward="ewri")
+    rows = []
+    rows.append(run_case("make_vec_env", make_vec_env(args.envs, 0, env_cfg), cfg, args.steps))
+    rows.append(
+        run_case(
+            "DummyVecEnv",
+            DummyVecEnv([lambda: VCPPEnv(env_cfg) for _ in range(args.envs)]),
+            cfg,
+            args.steps,
+        )
+    )
+    rows.append(
+        run_case(
+            "SubprocVecEnv",
+            SubprocVecEnv([lambda: VCPPEnv(env_cfg) for _ in range(args.envs)]),
+            cfg,
+            args.steps,
+        )
+    )
+    stack = build_env_stack("pirl", cfg, seed=0, advisor=None)  # advisor from the config
+    rows.append(
+        run_case(f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare)
+    )
+    stats = stack.pare.stats.as_dict()
+    stack.pare.close()
+
+    base = rows[0]["sps"]
+    print(f"PPO training on 15x15x3, {args.envs} envs, {args.steps:,} steps per case")
+    print(
+        f"{'case':<24} {'steps/s':>9} {'x vec':>7} {'env':>6} {'infer':>6} {'update':>7} "
+        f"{'advice':>7}"
+    )
+    for r in rows:
+        shares = [r[k] / r["wall"] for k in ("env", "inference", "update", "advice")]
+        print(
+            f"{r['name']:<24} {r['sps']:>9,.0f} {r['sps'] / base:>7.2f} "
+            + " ".join(f"{s:>6.0%}" for s in shares)
+        )
+    print(f"make_vec_env / DummyVecEnv: {base / rows[1]['sps']:.1f}x")
+    print(f"PIRL / PPO-EWRI (make_vec_env): {rows[3]['sps'] / base:.0%}")
+    print(
+        "PIRL advice: "
+        f"{stats['prompts_sent']} prompts in {stats['batches_sent']} batches, "
+        f"shaped steps fresh {stats['steps_fresh']}, stale {stats['steps_stale']}, "
+        f"missing {stats['steps_missing']}, mean staleness {stats['mean_staleness']:.1f}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,69 @@
+"""Build the advisor a run config names, with its cache and budget in front."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from pirl.advice.base import Advisor
+
+
+def default_cache_path() -> Path:
+    """``$PIRL_CACHE_DIR/advice.sqlite`` or ``~/.cache/pirl/advice.sqlite``."""
+    base = os.environ.get("PIRL_CACHE_DIR") or Path.home() / ".cache" / "pirl"
+    return Path(base) / "advice.sqlite"
+
+
+def make_advisor(name: str, cfg: Any, cache: bool | None = None) -> Advisor:
+    """``local``, ``openai`` or ``oracle`` as configured by a RunConfig ``cfg``.
+
+    LLM advisors get the budget (if any) and then the persistent cache in front, so cached
+    answers cost nothing. The oracle is not an LLM: it is neither cached nor budgeted (its
+    answer depends on the map, which the prompt does not hold).
+    """
+    from pirl.world.config import ConfigError
+
+    a, p = cfg.advisor, cfg.pare
+    if name == "oracle":
+        from pirl.advice.oracle import OracleAdvisor
+
+        return OracleAdvisor()
+    if name == "local":
+        from pirl.advice.local import LocalAdvisor
+
+        advisor: Advisor = LocalAdvisor(
+            a.local_model or None, num_threads=a.local_threads, batch_size=a.local_batch_size
+        )
+    elif name == "openai":
+        from pirl.advice.openai_advisor import OpenAIAdvisor
+
+        advisor = OpenAIAdvisor(
+            a.openai_model,
+            base_url=a.openai_base_url or None,
+            api_key_env=a.openai_api_key_env,
+            timeout_s=a.openai_timeout_s,
+            max_retries=a.openai_max_retries,
+            concurrency=a.openai_concurrency,
+        )
+    else:
+        raise ConfigError(f"advisor {name!r}: allowed values are local, openai, oracle")
+    if p.budget_calls or p.budget_tokens:
+        from pirl.advice.budget import Budget, BudgetedAdvisor
+
+        budget = Budget(p.budget_calls or None, p.budget_tokens or None)
+        advisor = BudgetedAdvisor(advisor, budget)
+    if p.cache if cache is None else cache:
+        from pirl.advice.cache import CachedAdvisor
+
+        advisor = CachedAdvisor(advisor, p.cache_path or default_cache_path())
+    return advisor
+
+
+def exhausted(advisor: Any) -> bool:
+    """Whether any layer of an advisor stack (cache -> budget -> backend) has run dry."""
+    while advisor is not None:
+        if getattr(advisor, "exhausted", False) is True:
+            return True
+        advisor = getattr(advisor, "inner", None)
+    return False

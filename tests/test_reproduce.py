@@ -1,0 +1,96 @@
+"""The main job end to end on the tiny preset: train all, evaluate, report, resume."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from pirl.agents.config import RunConfig
+from pirl.evaluate.reproduce import reproduce
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+SECRET = "sk-test-do-not-leak-4242"
+
+
+@pytest.fixture(scope="module")
+def reproduced(tmp_path_factory):
+    out = tmp_path_factory.mktemp("repro")
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
+    logs: list[str] = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("OPENAI_API_KEY", SECRET)
+        report = reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
+    return cfg, out, report, logs
+
+
+def test_every_method_is_trained_evaluated_and_reported(reproduced):
+    _, out, report, _ = reproduced
+    runs = sorted(p.name for p in (out / "runs").iterdir())
+    assert runs == ["il-s0", "pirl-oracle-s0", "ppo-ewri-s0", "ppo-sr-s0"]
+    summary = (out / "eval" / "summary.csv").read_text().splitlines()
+    methods = {line.split(",")[0] for line in summary[1:]}
+    assert methods == {
+        "ppo-sr", "ppo-ewri", "pirl-oracle", "il", "llm-only", "boustrophedon", "random",
+    }  # fmt: skip
+    table = (report.parent / "table.md").read_text()
+    assert "Table 1: grid simulator" in table
+    assert "PIRL (oracle advisor, not an LLM)" in table
+    assert "LLM-only (oracle, not an LLM)" in table
+    assert "(0.64)" not in table  # sizes without a paper column carry no paper numbers
+    for name in ("figure.png", "learning_curves.png"):
+        assert (report.parent / name).stat().st_size > 10_000
+    gifs = sorted(p.name for p in (report.parent / "gifs").iterdir())
+    assert "boustrophedon.gif" in gifs and "ppo-ewri.gif" in gifs and "llm-only.gif" in gifs
+    html = report.read_text()
+    assert html.count("data:image/") >= 2 + len(gifs)
+    for path in out.rglob("*"):
+        if path.is_file() and path.suffix in (".html", ".yaml", ".json", ".csv", ".jsonl", ".md"):
+            assert SECRET not in path.read_text(errors="ignore"), path
+
+
+def test_report_renders_in_headless_chromium(reproduced, tmp_path):
+    _, _, report, _ = reproduced
+    assert CHROMIUM, "headless Chromium is needed (Debian package chromium; .ci/run installs it)"
+    dom = subprocess.run(
+        [
+            CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+            "--no-first-run", "--disable-background-networking", "--disable-component-update",
+            "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}",
+            "--virtual-time-budget=10000", "--dump-dom", report.as_uri(),
+        ],
+        capture_output=True, text=True, timeout=120,
+    ).stdout  # fmt: skip
+    match = re.search(r'data-images="(\d+)/(\d+)"', dom)
+    assert match, "the page's load script did not run"
+    loaded, total = map(int, match.groups())
+    assert total >= 8 and loaded == total
+
+
+def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced):
+    cfg, out, report, _ = reproduced
+    before = (out / "eval" / "summary.csv").read_text()
+    logs: list[str] = []
+    reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
+    assert sum("already trained" in line for line in logs) == 4
+    assert (out / "eval" / "summary.csv").read_text() == before
+
+
+def test_an_interrupted_run_resumes_from_its_checkpoint(reproduced):
+    cfg, out, _, _ = reproduced
+    run = out / "runs" / "ppo-sr-s0"
+    meta = json.loads((run / "meta.json").read_text())
+    meta["complete"] = False
+    (run / "meta.json").write_text(json.dumps(meta))
+    (run / "model.zip").unlink()
+    logs: list[str] = []
+    reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
+    assert "ppo-sr-s0: resuming" in logs
+    assert json.loads((run / "meta.json").read_text())["complete"]
