@@ -277,6 +277,64 @@ def _summary_table(path: Path) -> Table:
     return table
 
 
+@app.command()
+@_clean_errors
+def advise(
+    advisor: Annotated[str, typer.Option(help="local, openai or oracle.")] = "local",
+    size: SizeOpt = (15, 15, 3),
+    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
+    config: Annotated[
+        Path | None, typer.Option(help="Preset with advisor settings (e.g. base_url).")
+    ] = None,
+    model: Annotated[str | None, typer.Option(help="openai model, or local model folder.")] = None,
+    base_url: Annotated[str | None, typer.Option(help="OpenAI-compatible server URL.")] = None,
+    cache: Annotated[bool, typer.Option(help="Use the persistent answer cache.")] = True,
+) -> None:
+    """Ask the advisor about one scenario's first state: the check to run first on a new LLM."""
+    import time
+
+    from pirl.advice.factory import make_advisor
+    from pirl.advice.prompt import build_prompt
+    from pirl.agents.config import RunConfig
+    from pirl.env import VCPPEnv
+    from pirl.pare.state import prompt_state
+    from pirl.world.planning import WorldView
+
+    cfg = RunConfig.from_yaml(config) if config else RunConfig()
+    changes: dict[str, Any] = {}
+    if model is not None:
+        changes["openai_model" if advisor == "openai" else "local_model"] = model
+    if base_url is not None:
+        changes["openai_base_url"] = base_url
+    if changes:
+        cfg = cfg.with_overrides(advisor=changes)
+    env = VCPPEnv(cfg.env.replace(size=tuple(size)))
+    env.reset(seed=seed)
+    prompt = build_prompt(prompt_state(env.world, 0), cfg.pare.prompt_variant)
+    console.rule("prompt")
+    console.print(prompt, markup=False, highlight=False)
+    start = time.perf_counter()
+    backend = make_advisor(advisor, cfg, cache=cache)
+    loaded = time.perf_counter() - start
+    if getattr(backend, "needs_context", False):
+        answer = backend.advise([prompt], [WorldView.of(env.world, 0, copy=True)])[0]
+    else:
+        answer = backend.advise([prompt])[0]
+    console.rule(f"answer from {backend.label}")
+    console.print(answer.text or "(no text)", markup=False, highlight=False)
+    console.rule("result")
+    rec = answer.recommendation
+    console.print(f"parsed:      {rec if rec is not None else 'could not parse'}", markup=False)
+    console.print(f"latency:     {answer.latency_s:.2f} s (advisor set-up {loaded:.1f} s)")
+    console.print(f"tokens:      {answer.prompt_tokens} in, {answer.completion_tokens} out")
+    console.print(f"from cache:  {answer.from_cache}")
+    if answer.error:
+        console.print(f"[bold red]error:[/] {answer.error}")
+    backend.close()
+    if rec is None:
+        raise typer.Exit(1)
+
+
 MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")
 
 
