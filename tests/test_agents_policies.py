@@ -1,0 +1,95 @@
+"""Policies behind one interface: IL (TabNet), LLM-only, loading by name or run folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pirl.advice.base import Advisor, Answer
+from pirl.advice.oracle import OracleAdvisor
+from pirl.advice.recommendation import Recommendation
+from pirl.agents.config import RunConfig
+from pirl.agents.imitation import train_il
+from pirl.agents.llm_only import LLMOnlyPolicy, action_queue
+from pirl.agents.loading import PPOPolicy, TabNetPolicy, load_policy
+from pirl.agents.policy import hold_action
+from pirl.agents.train import train
+from pirl.env import VCPPEnv
+from pirl.evaluate import run_episode
+from pirl.world.config import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class Mute(Advisor):
+    """An advisor whose answers never parse."""
+
+    name, model, label = "mute", "none", "mute"
+
+    def settings_key(self) -> str:
+        return "-"
+
+    def advise(self, prompts):
+        return [Answer("no idea", None) for _ in prompts]
+
+
+def test_action_queue_camera_first_then_move():
+    rec = Recommendation(pan=30, tilt=70, zoom=1.2, dx=1, dy=-1, dz=0)
+    # From tilt 90, pan 0, zoom 1.0: 4 x tilt-5, 2 x pan+15, 2 x zoom+0.1, then x+, y-.
+    assert action_queue((90, 0, 10), rec) == [7, 7, 7, 7, 8, 8, 10, 10, 0, 3]
+    # Values between grid steps snap to the nearest step.
+    assert action_queue((90, 0, 10), Recommendation(0, 86.0, 1.04, 0, 0, 1)) == [7, 4]
+    assert action_queue((90, 0, 10), Recommendation(0, 90, 1.0, 0, 0, 0)) == []
+
+
+def test_hold_action_changes_nothing_when_it_can():
+    env = VCPPEnv(size=(10, 10, 3), wind_prob=0.0)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(hold_action((90, 0, 10)))
+    assert info["idle"] and info["camera"] == (90, 0, 1.0)
+
+
+def test_llm_only_with_oracle_covers_and_respects_its_call_limit():
+    env = VCPPEnv(size=(20, 20, 3))
+    policy = LLMOnlyPolicy(OracleAdvisor())
+    assert "oracle" in policy.label
+    full = run_episode(env, policy, seed=3).metrics
+    assert full["vcr"] > 0.8
+    limited = LLMOnlyPolicy(OracleAdvisor(), max_calls=5)
+    short = run_episode(env, limited, seed=3).metrics
+    assert limited.stats()["calls"] == 5
+    assert short["vcr"] < full["vcr"]
+
+
+def test_llm_only_holds_when_answers_do_not_parse():
+    env = VCPPEnv(size=(10, 10, 3), wind_prob=0.0, max_steps=20, scale_by_alpha=False)
+    policy = LLMOnlyPolicy(Mute())
+    metrics = run_episode(env, policy, seed=1).metrics
+    assert policy.stats()["failed"] == 20
+    assert metrics["collisions"] == 0 and metrics["camera_share"] == 1.0
+
+
+def test_ppo_and_il_runs_load_as_policies(tmp_path):
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
+    expert = tmp_path / "ewri"
+    train("ppo-ewri", cfg, expert, seed=0, show_progress=False)
+    il_model = train_il(cfg, expert, tmp_path / "il", seed=0)
+    stats = json.loads((tmp_path / "il" / "il_stats.json").read_text())
+    assert 0.0 <= stats["valid_accuracy"] <= 1.0
+    assert stats["train_rows"] + stats["valid_rows"] <= cfg.il.expert_steps
+    assert il_model.is_file()
+    env = VCPPEnv(size=(15, 15, 3))
+    ppo, il = load_policy(expert), load_policy(tmp_path / "il")
+    assert isinstance(ppo, PPOPolicy) and ppo.label == "PPO-EWRI"
+    assert isinstance(il, TabNetPolicy)
+    for policy in (ppo, il, load_policy("boustrophedon"), load_policy("random", seed=1)):
+        metrics = run_episode(env, policy, seed=11).metrics
+        assert 0.0 <= metrics["vcr"] <= 1.0
+    with pytest.raises(ConfigError, match="not a finished PPO run|not a run folder"):
+        train_il(cfg, tmp_path / "il", tmp_path / "il2")
+    with pytest.raises(ConfigError, match="neither a run folder nor a method"):
+        load_policy("ppo-magic")
+    with pytest.raises(ConfigError, match="needs an advisor"):
+        load_policy("llm-only")
