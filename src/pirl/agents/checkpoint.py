@@ -31,6 +31,7 @@ _WORLD_ARRAYS = (
 )  # fmt: skip
 _PARE_ARRAYS = (
     "_rec", "_has_rec", "_rec_step", "_rec_cached", "_episode", "_episode_step", "_want", "_p_t",
+    "_counts",
 )  # fmt: skip
 
 

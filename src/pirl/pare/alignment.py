@@ -14,9 +14,48 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 
 from pirl.advice.recommendation import Recommendation
+
+
+@numba.njit(cache=True, inline="always")
+def _align_one(e, p_t, p_next, cam_next, rec, d_max, alpha, out):
+    """Row e of ``out`` gets (dir_align, pos_align, move, cam) of world e."""
+    dot = nq = ndp = dist = 0.0
+    for k in range(3):
+        dp = p_next[e, k] - p_t[e, k]
+        dq = rec[e, 3 + k]
+        dot += dp * dq
+        ndp += dp * dp
+        nq += dq * dq
+        off = p_next[e, k] - (p_t[e, k] + dq)
+        dist += off * off
+    norms = np.sqrt(ndp) * np.sqrt(nq)
+    dir_align = dot / norms if norms > 0.0 else 0.0
+    # A one-cell world has d_max = 0: there only being on target counts.
+    on_target = 1.0 if dist == 0.0 else 0.0
+    pos_align = 1.0 - np.sqrt(dist) / d_max if d_max > 0.0 else on_target
+    cam = (
+        -(
+            abs(cam_next[e, 0] - rec[e, 1]) / 90.0
+            + abs(cam_next[e, 1] - rec[e, 0]) / 180.0
+            + abs(cam_next[e, 2] - rec[e, 2]) / 1.5
+        )
+        / 3.0
+    )
+    out[e, 0] = dir_align
+    out[e, 1] = pos_align
+    out[e, 2] = alpha * dir_align + (1.0 - alpha) * pos_align
+    out[e, 3] = cam
+
+
+@numba.njit(cache=True)
+def alignment_kernel(p_t, p_next, cam_next, rec, d_max, alpha, out):
+    """Alignment terms of every world (rows of ``out``: dir_align, pos_align, move, cam)."""
+    for e in range(p_t.shape[0]):
+        _align_one(e, p_t, p_next, cam_next, rec, d_max, alpha, out)
 
 
 def alignment_arrays(
@@ -29,29 +68,18 @@ def alignment_arrays(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Batched terms: positions (N, 3), camera (N, 3) as (tilt, pan, zoom), advice (N, 6) as
     (pan, tilt, zoom, dx, dy, dz). Returns ``dir_align, pos_align, move, cam``, each (N,)."""
-    p_t = np.asarray(p_t, dtype=np.float64)
-    p_next = np.asarray(p_next, dtype=np.float64)
-    cam_next = np.asarray(cam_next, dtype=np.float64)
-    rec = np.asarray(rec, dtype=np.float64)
-    dp = p_next - p_t
-    dq = rec[:, 3:6]
-    norms = np.linalg.norm(dp, axis=1) * np.linalg.norm(dq, axis=1)
-    dots = (dp * dq).sum(axis=1)
-    dir_align = np.divide(dots, norms, out=np.zeros_like(dots), where=norms > 0)
+    out = np.empty((len(p_t), 4))
     d_max = float(np.linalg.norm(np.asarray(size, dtype=np.float64) - 1.0))
-    miss = np.linalg.norm(p_next - (p_t + dq), axis=1)
-    # A 1x1x1 grid has d_max = 0: the advised cell is either reached (1) or not (0).
-    pos_align = 1.0 - miss / d_max if d_max > 0 else (miss == 0.0).astype(np.float64)
-    move = alpha * dir_align + (1.0 - alpha) * pos_align
-    cam = (
-        -(
-            np.abs(cam_next[:, 0] - rec[:, 1]) / 90.0
-            + np.abs(cam_next[:, 1] - rec[:, 0]) / 180.0
-            + np.abs(cam_next[:, 2] - rec[:, 2]) / 1.5
-        )
-        / 3.0
+    alignment_kernel(
+        np.asarray(p_t, dtype=np.float64),
+        np.asarray(p_next, dtype=np.float64),
+        np.asarray(cam_next, dtype=np.float64),
+        np.asarray(rec, dtype=np.float64),
+        d_max,
+        float(alpha),
+        out,
     )
-    return dir_align, pos_align, move, cam
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 3]
 
 
 def alignment(

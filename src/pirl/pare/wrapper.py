@@ -31,15 +31,15 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.factory import exhausted
 from pirl.advice.prompt import build_prompt
-from pirl.env.rewards import LLM_INDEX
 from pirl.env.vec_env import VCPPVecEnv
-from pirl.pare.alignment import alignment_arrays
+from pirl.pare.alignment import _align_one
 from pirl.pare.state import prompt_state
 from pirl.world import dynamics as D
 from pirl.world.config import ConfigError
@@ -47,6 +47,44 @@ from pirl.world.planning import WorldView
 
 STATUSES = ("missing", "fresh", "cached", "stale")
 _MISSING, _FRESH, _CACHED, _STALE = range(4)
+
+
+@numba.njit(cache=True)
+def _shape(
+    p_t, ints, rec, has, rec_step, rec_cached, t, d_max, alpha, lam_cam, lam_move, weights,
+    llm_col, rewards, terms, p_next, cam_next, table, status, staleness, counts,
+):  # fmt: skip
+    """One step of PARE for every world: alignment, f_llm, status, the shaped reward.
+
+    ``table`` rows get (f_llm, dir_align, pos_align, move, cam), all 0 without advice; the LLM
+    term is written into the step's reward terms and ``w_llm * f_llm`` added to ``rewards``.
+    ``counts`` accumulates (missing, fresh, cached, stale, staleness sum).
+    """
+    for e in range(p_t.shape[0]):
+        p_next[e, 0], p_next[e, 1], p_next[e, 2] = ints[e, D.PX], ints[e, D.PY], ints[e, D.PZ]
+        cam_next[e, 0], cam_next[e, 1] = ints[e, D.TILT], ints[e, D.PAN]
+        cam_next[e, 2] = ints[e, D.ZOOM] / 10.0
+        if not has[e]:
+            for k in range(5):
+                table[e, k] = 0.0
+            status[e], staleness[e] = _MISSING, 0
+            terms[e, llm_col] = 0.0
+            counts[_MISSING] += 1
+            continue
+        _align_one(e, p_t, p_next, cam_next, rec, d_max, alpha, table[:, 1:])
+        f = lam_cam * table[e, 4] + lam_move * table[e, 3]
+        table[e, 0] = f
+        terms[e, llm_col] = f
+        rewards[e] += np.float32(weights[e, llm_col] * f)
+        staleness[e] = t - rec_step[e]
+        if staleness[e] > 0:
+            status[e] = _STALE
+        elif rec_cached[e]:
+            status[e] = _CACHED
+        else:
+            status[e] = _FRESH
+        counts[status[e]] += 1
+        counts[4] += staleness[e]
 
 
 @dataclass
@@ -135,7 +173,6 @@ class PAREVecEnv(VecEnvWrapper):
 
         n = venv.num_envs
         self._world = venv.world
-        self._size = np.array(venv.cfg.size, dtype=np.float64)
         self._rec = np.zeros((n, 6), dtype=np.float64)  # pan, tilt, zoom, dx, dy, dz
         self._has_rec = np.zeros(n, dtype=bool)
         self._rec_step = np.zeros(n, dtype=np.int64)
@@ -144,6 +181,13 @@ class PAREVecEnv(VecEnvWrapper):
         self._episode_step = np.zeros(n, dtype=np.int64)
         self._want = np.zeros(n, dtype=bool)  # due a query, not yet sent
         self._p_t = np.zeros((n, 3), dtype=np.float64)
+        self._p_next = np.zeros((n, 3), dtype=np.float64)
+        self._cam_next = np.zeros((n, 3), dtype=np.float64)
+        self._table = np.zeros((n, 5), dtype=np.float64)
+        self._status = np.zeros(n, dtype=np.int64)
+        self._staleness = np.zeros(n, dtype=np.int64)
+        self._counts = np.zeros(5, dtype=np.int64)  # missing, fresh, cached, stale, stale sum
+        self._d_max = float(np.linalg.norm(np.asarray(venv.cfg.size, dtype=np.float64) - 1.0))
         self._t = 0
         self._job: _Job | None = None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pare-advisor")
@@ -235,59 +279,46 @@ class PAREVecEnv(VecEnvWrapper):
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
         self._collect(wait=self.mode == "sync")
-        snap = self.venv.step_snapshot
         # The snapshot was taken before auto-reset: it holds p_{t+1}, the camera after the
         # action and the ended episodes' weights.
-        p_next = snap.ints[:, D.PX : D.PZ + 1].astype(np.float64)
-        cam_next = snap.ints[:, [D.TILT, D.PAN, D.ZOOM]].astype(np.float64)
-        cam_next[:, 2] /= 10.0
-        dir_align, pos_align, move, cam = alignment_arrays(
-            self._p_t, p_next, cam_next, self._rec, self._size, self.alpha
-        )
-        has = self._has_rec
-        f_llm = np.where(has, self.lam_cam * cam + self.lam_move * move, 0.0)
-        status = np.full(self.num_envs, _MISSING, dtype=np.int64)
-        staleness = np.where(has, self._t - self._rec_step, 0)
-        status[has & (staleness == 0)] = _FRESH
-        status[has & (staleness == 0) & self._rec_cached] = _CACHED
-        status[has & (staleness > 0)] = _STALE
-        self._count(status, staleness)
-
-        snap.terms[:, D.T_LLM] = f_llm
-        shaped = rewards + (snap.weights[:, LLM_INDEX] * f_llm).astype(np.float32)
-        table = np.stack([f_llm, dir_align, pos_align, move, cam], axis=1)
-        values = np.where(has[:, None], table, 0.0).tolist()
-        codes, stale_list = status.tolist(), staleness.tolist()
+        snap = self.venv.step_snapshot
+        table, status, staleness = self._table, self._status, self._staleness
+        _shape(
+            self._p_t, snap.ints, self._rec, self._has_rec, self._rec_step, self._rec_cached,
+            self._t, self._d_max, self.alpha, self.lam_cam, self.lam_move, snap.weights,
+            D.T_LLM, rewards, snap.terms, self._p_next, self._cam_next, table, status,
+            staleness, self._counts,
+        )  # fmt: skip
+        # Copies: the lazy infos read them later, after these buffers moved on.
+        table, status, staleness = table.copy(), status.copy(), staleness.copy()
         snap.extras["pare"] = lambda e: {
-            "f_llm": values[e][0],
-            "dir_align": values[e][1],
-            "pos_align": values[e][2],
-            "move": values[e][3],
-            "cam": values[e][4],
-            "status": STATUSES[codes[e]],
-            "staleness": stale_list[e],
+            "f_llm": float(table[e, 0]),
+            "dir_align": float(table[e, 1]),
+            "pos_align": float(table[e, 2]),
+            "move": float(table[e, 3]),
+            "cam": float(table[e, 4]),
+            "status": STATUSES[status[e]],
+            "staleness": int(staleness[e]),
         }
-
+        st, counts = self.stats, self._counts
+        st.steps += self.num_envs
+        st.steps_missing, st.steps_fresh, st.steps_cached, st.steps_stale = (
+            int(counts[_MISSING]),
+            int(counts[_FRESH]),
+            int(counts[_CACHED]),
+            int(counts[_STALE]),
+        )
+        st.staleness_sum = int(counts[4])
         self._t += 1
         self._episode_step += 1
-        ended = np.flatnonzero(dones)
-        if ended.size:
+        if dones.any():
+            ended = np.flatnonzero(dones)
             self._episode[ended] += 1
             self._episode_step[ended] = 0
             self._has_rec[ended] = False
             self._want[ended] = False
         self._send_due()
-        return obs, shaped, dones, infos
-
-    def _count(self, status: np.ndarray, staleness: np.ndarray) -> None:
-        s = self.stats
-        s.steps += self.num_envs
-        s.steps_fresh += int((status == _FRESH).sum())
-        s.steps_cached += int((status == _CACHED).sum())
-        s.steps_stale += int((status == _STALE).sum())
-        s.steps_missing += int((status == _MISSING).sum())
-        s.staleness_sum += int(staleness[status != _MISSING].sum())
-        s.budget_exhausted = exhausted(self.advisor)
+        return obs, rewards, dones, infos
 
     def _drain(self) -> None:
         if self._job is not None:
