@@ -51,14 +51,16 @@ for _axis in ("x", "y", "z"):
 
 # Words that may stand between a key and its separator, or before the key ("camera pan angle",
 # "Tilt (deg)", "move along X axis"), but never name a key themselves.
-_FILLERS: frozenset[str] = frozenset(
-    """
-    a an the new next target targeted recommended recommend suggested suggest set setting
-    value values angle angles deg degree degrees level levels factor camera cam gimbal
-    move moves movement movements step steps delta δ d change direction dir axis along on in
-    by to of at is for rec desired final adjust adjustment axes
-    """.split()
-)
+# fmt: off
+_FILLERS: frozenset[str] = frozenset({
+    "a", "an", "the", "new", "next", "target", "targeted", "recommended", "recommend",
+    "suggested", "suggest", "set", "setting", "value", "values", "angle", "angles", "deg",
+    "degree", "degrees", "level", "levels", "factor", "camera", "cam", "gimbal", "move", "moves",
+    "movement", "movements", "step", "steps", "delta", "δ", "d", "change", "direction", "dir",
+    "axis", "along", "on", "in", "by", "to", "of", "at", "is", "for", "rec", "desired", "final",
+    "adjust", "adjustment", "axes"
+})
+# fmt: on
 
 # A number, possibly signed, possibly without a leading or trailing digit ("-.5", "1.").
 _NUMBER = r"[+-]?\s?(?:\d+(?:\.\d*)?|\.\d+)"
@@ -82,12 +84,12 @@ _TRIPLE_KEYS: frozenset[str] = frozenset(
     {"move", "movement", "moves", "direction", "delta", "step", "xyz", "dxyz", "dxdydz", "offset"}
 )
 # Words that make the key after them a state, not advice ("position x: 3", "current tilt: 40").
-_ABSOLUTE: frozenset[str] = frozenset(
-    """
-    position pos location coordinate coordinates coords center centre size grid current
-    drone uav now currently
-    """.split()
-)
+# fmt: off
+_ABSOLUTE: frozenset[str] = frozenset({
+    "position", "pos", "location", "coordinate", "coordinates", "coords", "center", "centre",
+    "size", "grid", "current", "drone", "uav", "now", "currently"
+})
+# fmt: on
 # Where a key's context ends on the left.
 _DELIMITERS = re.compile(r"[,;\n{}\[\]|]")
 _WORD = re.compile(r"[a-zδ]+")

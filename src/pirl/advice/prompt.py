@@ -5,7 +5,9 @@ obstacle coordinates and radii to 1 decimal), so equal situations give byte-equa
 advice cache can work. Two variants exist:
 
 - ``paper``: the paper's three parts in full sentences (DESIGN.md section 6).
-- ``compact``: the same items in terse form, about half the tokens, for small local models.
+- ``compact``: the same items in terse form, for small local models: about 40% fewer tokens,
+  and the format line shows each value's range instead of sample values (a 135M model copies
+  sample values verbatim).
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ VARIANTS: tuple[str, ...] = ("paper", "compact")
 FOOTPRINTS: tuple[str, ...] = ("paper", "frustum")
 """Footprint models a prompt can describe."""
 
-FORMAT_TEMPLATE = "pan: <deg>, tilt: <deg>, zoom: <zoom>, X: <-1|0|1>, Y: <-1|0|1>, Z: <-1|0|1>"
-"""The answer format with placeholders."""
+COMPACT_TEMPLATE = (
+    "pan: <-90..90>, tilt: <0..90>, zoom: <0.5..2.0>, X: <-1|0|1>, Y: <-1|0|1>, Z: <-1|0|1>"
+)
+"""The compact variant's format line: the exact format, with each value's range as placeholder."""
 
 
 @dataclass(frozen=True)
@@ -99,12 +103,12 @@ def _obstacles(state: PromptState, compact: bool) -> str:
     if not state.obstacles:
         return "none"
     items = []
-    for i, (cx, cy, cz, r) in enumerate(state.obstacles, start=1):
-        center = f"[{_num(cx, 1)}, {_num(cy, 1)}, {_num(cz, 1)}]"
-        items.append(
-            f"{center} r {_num(r, 1)}" if compact else f"{i}) {center} radius {_num(r, 1)}"
-        )
-    return "; ".join(items)
+    for cx, cy, cz, r in state.obstacles:
+        if compact:
+            items.append(f"[{_num(cx, 1)},{_num(cy, 1)},{_num(cz, 1)},{_num(r, 1)}]")
+        else:
+            items.append(f"[{_num(cx, 1)}, {_num(cy, 1)}, {_num(cz, 1)}] radius {_num(r, 1)}")
+    return " ".join(items) if compact else "; ".join(items)
 
 
 def _view(state: PromptState, compact: bool) -> str:
@@ -114,36 +118,37 @@ def _view(state: PromptState, compact: bool) -> str:
         side = 2 * h + 1
         if compact:
             return (
-                "square of ground cells under the drone, half-width floor(m*zoom+0.5), "
-                f"m=2 if tilt<80 else 1; now {h} ({side}x{side} cells)"
+                "ground square centered below the drone, half-width floor(m*zoom+0.5), "
+                f"m=2 if tilt<80 else 1 (now {side}x{side} cells)"
             )
         return (
-            "The camera sees a square of ground cells (z=0) centered below the drone. Its "
-            "half-width is floor(m*zoom+0.5) cells, with m=2 when tilt < 80 and m=1 otherwise; "
-            f"now {h}, so {side}x{side} cells. Altitude and pan do not change it."
+            "a square of ground cells centered below the drone, half-width floor(m*zoom+0.5) "
+            f"cells with m=2 if tilt < 80 else m=1 (now {side}x{side} cells); altitude and pan "
+            "do not change it."
         )
     altitude = int(state.position[2]) + 1
     fov = math.degrees(2.0 * math.atan(math.tan(math.radians(state.fov_deg) / 2.0) / state.zoom))
+    fov0 = _num(state.fov_deg, 0)
+    reach = _num(state.max_range, 1)
     if compact:
         return (
             f"pinhole camera {altitude} cells above ground, horizontal FOV "
-            f"2*atan(tan({_num(state.fov_deg, 0)}/2)/zoom) = {_num(fov, 0)} deg now, aspect 4:3, "
-            f"aimed by tilt and pan, max range {_num(state.max_range, 1)} cells"
+            f"2*atan(tan({fov0}/2)/zoom) (now {_num(fov, 0)} deg), aimed by tilt and pan, "
+            f"range {reach} cells"
         )
     return (
-        f"The camera is a pinhole at altitude z+1 = {altitude} cells above the ground. Its "
-        f"horizontal field of view is 2*atan(tan({_num(state.fov_deg, 0)}/2)/zoom) degrees "
-        f"({_num(fov, 0)} now; zooming in narrows it), aspect 4:3. Tilt is the angle below the "
-        "horizon (90 = straight down) and pan the heading (0 = +x). It sees the ground cells "
-        f"inside its view, up to {_num(state.max_range, 1)} cells away."
+        f"a pinhole camera at altitude z+1 = {altitude} cells, horizontal field of view "
+        f"2*atan(tan({fov0}/2)/zoom) degrees (now {_num(fov, 0)}; zooming in narrows it), aspect "
+        "4:3, pointed by tilt (below the horizon, 90 = straight down) and pan (heading, 0 = +x); "
+        f"it sees the ground cells inside its view up to {reach} cells away."
     )
 
 
 def _ranges() -> str:
     return (
         f"pan [{PAN_RANGE[0]:g}, {PAN_RANGE[1]:g}] degrees, tilt [{TILT_RANGE[0]:g}, "
-        f"{TILT_RANGE[1]:g}] degrees, zoom [{ZOOM_RANGE[0]:g}, {ZOOM_RANGE[1]:g}], "
-        "X, Y, Z each -1, 0 or 1"
+        f"{TILT_RANGE[1]:g}] degrees (90 = straight down), zoom [{ZOOM_RANGE[0]:.1f}, "
+        f"{ZOOM_RANGE[1]:.1f}], X, Y, Z each -1, 0 or 1"
     )
 
 
@@ -165,45 +170,39 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
     compact = variant == "compact"
     x, y, z = (int(v) for v in state.position)
     sx, sy, sz = (int(v) for v in state.size)
-    camera = (
-        f"[{_num(state.fov_deg, 0)}, {state.resolution}, {int(state.tilt)}, {int(state.pan)}, "
-        f"{_zoom(state.zoom)}]"
+    items = (_num(state.fov_deg, 0), state.resolution, int(state.tilt), int(state.pan))
+    camera = ("[{},{},{},{},{}]" if compact else "[{}, {}, {}, {}, {}]").format(
+        *items, _zoom(state.zoom)
     )
     battery = _num(min(max(state.battery, 0.0), 1.0), decimals)
     coverage = _num(min(max(state.coverage, 0.0), 1.0), decimals)
     if compact:
         return (
-            "Task: steer a drone with a pan-tilt-zoom camera to see as much ground as possible, "
-            "avoiding obstacles, saving battery and not re-viewing seen cells.\n"
-            f"Grid: {sx}x{sy}x{sz} cells (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1}).\n"
-            f"Position [x, y, z]: [{x}, {y}, {z}]\n"
-            f"Camera [fov, resolution, tilt, pan, zoom]: {camera}\n"
-            f"Battery: {battery}. Coverage: {coverage}.\n"
-            f"View: {_view(state, compact=True)}.\n"
-            f"Obstacles (center, radius): {_obstacles(state, compact=True)}.\n"
-            f"Ranges: {_ranges()}.\n"
-            f"Answer one line: {FORMAT_TEMPLATE}\n"
-            f"Example: {FORMAT_EXAMPLE}"
+            "Drone camera task: pick the next camera setting and one-cell move to see the most "
+            "unseen ground, avoid obstacles and save battery.\n"
+            f"Grid {sx}x{sy}x{sz} (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1})\n"
+            f"Position [x,y,z]: [{x},{y},{z}]\n"
+            f"Camera [fov,resolution,tilt,pan,zoom]: {camera}\n"
+            f"Battery {battery}, coverage {coverage}\n"
+            f"View: {_view(state, compact=True)}\n"
+            f"Obstacles [x,y,z,radius]: {_obstacles(state, compact=True)}\n"
+            f"Reply in this format: {COMPACT_TEMPLATE}"
         )
-    n = len(state.obstacles)
     return (
         "[Task]\n"
-        "You control a drone that carries a gimbal camera with pan, tilt and zoom. Suggest its "
-        "next move and camera setting so that it sees as many ground cells as possible, while "
-        "avoiding obstacles, using little battery and not looking again at cells already seen.\n"
+        "You control a drone whose gimbal camera can pan, tilt and zoom. Suggest its next move "
+        "and camera setting to see as many ground cells as possible while avoiding obstacles, "
+        "saving battery and not viewing cells again.\n"
         "\n[Environment]\n"
-        f"Grid: {sx} x {sy} x {sz} cells; x from 0 to {sx - 1}, y from 0 to {sy - 1}, "
-        f"z (altitude) from 0 to {sz - 1}. The ground is z=0.\n"
+        f"Grid: {sx} x {sy} x {sz} cells (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1}; ground z=0)\n"
         f"Drone position [x, y, z]: [{x}, {y}, {z}]\n"
-        f"Camera [field of view (deg), resolution, tilt (deg), pan (deg), zoom]: {camera}\n"
-        f"Battery: {battery} (1 = full, 0 = empty)\n"
-        f"Coverage: {coverage} (share of ground cells seen so far)\n"
+        f"Camera [field of view, resolution, tilt, pan, zoom]: {camera}\n"
+        f"Battery: {battery} (1 full, 0 empty)\n"
+        f"Coverage: {coverage} (share of ground cells seen)\n"
         f"View cone: {_view(state, compact=False)}\n"
-        f"Obstacles ({n} spheres, center [x, y, z] and radius): "
-        f"{_obstacles(state, compact=False)}\n"
+        f"Obstacles (spheres, center [x, y, z] and radius): {_obstacles(state, compact=False)}\n"
         "\n[Request]\n"
-        "Give a target pan, tilt and zoom, and a move of one cell or none along each axis "
-        f"(X, Y, Z). Ranges: {_ranges()}.\n"
-        f"Reply with exactly one line in this format: {FORMAT_TEMPLATE}\n"
-        f"For example: {FORMAT_EXAMPLE}"
+        "Give a target pan, tilt and zoom, and a move of -1, 0 or 1 cell along X, Y and Z. "
+        f"Ranges: {_ranges()}.\n"
+        f"Reply with one line in exactly this format: {FORMAT_EXAMPLE}"
     )

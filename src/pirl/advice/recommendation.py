@@ -105,7 +105,7 @@ class Recommendation:
         return (self.dx, self.dy, self.dz)
 
     def to_text(self) -> str:
-        """The answer in the exact output format, e.g. ``pan: 75, tilt: 45, zoom: 1.0, X: -1, ...``."""
+        """The answer in the exact output format, ``pan: 75, tilt: 45, zoom: 1.0, X: -1, ...``."""
         return (
             f"pan: {_fmt(self.pan)}, tilt: {_fmt(self.tilt)}, zoom: {_fmt(self.zoom, 1)}, "
             f"X: {self.dx}, Y: {self.dy}, Z: {self.dz}"

@@ -1,0 +1,232 @@
+"""Advisor for OpenAI and OpenAI-compatible servers (Ollama, vLLM, llama.cpp, transformers serve).
+
+The API key is read from the environment only (``OPENAI_API_KEY`` by default) and handed to the
+client; it is not stored on the advisor, not shown by ``repr`` and not pickled.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import random
+import re
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+from urllib.parse import urlparse
+
+from pirl.advice.base import Advisor, Answer, error_answer
+from pirl.advice.parser import parse_recommendation
+
+__all__ = ["OpenAIAdvisor"]
+
+log = logging.getLogger(__name__)
+
+NO_KEY = "not-needed"
+"""Key sent to a ``base_url`` server when the environment holds none (local servers ignore it)."""
+
+
+class OpenAIAdvisor(Advisor):
+    """Chat-completions advisor with timeouts, retries and bounded concurrency.
+
+    Args:
+        model: model name; for ``transformers serve`` the exact model folder path it serves.
+        base_url: an OpenAI-compatible server (e.g. ``http://127.0.0.1:8000/v1``); ``None`` for
+            OpenAI itself.
+        api_key_env: environment variable that holds the key. Required for OpenAI; with a
+            ``base_url`` a missing key is replaced by ``"not-needed"``.
+        timeout_s: per-request timeout, seconds.
+        max_retries: retries after the first attempt, on rate limits (429), timeouts, dropped
+            connections and server errors (5xx). Other errors are not retried.
+        backoff_s: first retry delay; doubled at each retry, capped by ``max_backoff_s``, with
+            up to 10% jitter. A server's ``Retry-After`` is honoured within the cap.
+        max_backoff_s: longest delay between attempts.
+        concurrency: requests in flight at once for a batch.
+        temperature: sampling temperature (0 for the most deterministic answers).
+        max_tokens: answer length limit, tokens.
+        system_prompt: optional system message.
+        seed: optional ``seed`` request field (best-effort determinism on OpenAI).
+    """
+
+    name = "openai"
+
+    def __init__(
+        self,
+        model: str = "gpt-3.5-turbo",
+        *,
+        base_url: str | None = None,
+        api_key_env: str = "OPENAI_API_KEY",
+        timeout_s: float = 30.0,
+        max_retries: int = 3,
+        backoff_s: float = 0.5,
+        max_backoff_s: float = 8.0,
+        concurrency: int = 4,
+        temperature: float = 0.0,
+        max_tokens: int = 64,
+        system_prompt: str | None = None,
+        seed: int | None = None,
+    ) -> None:
+        if concurrency < 1:
+            raise ValueError(f"concurrency must be >= 1, got {concurrency}")
+        if max_retries < 0:
+            raise ValueError(f"max_retries must be >= 0, got {max_retries}")
+        if timeout_s <= 0:
+            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        self.model = model
+        self.base_url = base_url
+        self.api_key_env = api_key_env
+        self.timeout_s = float(timeout_s)
+        self.max_retries = int(max_retries)
+        self.backoff_s = float(backoff_s)
+        self.max_backoff_s = float(max_backoff_s)
+        self.concurrency = int(concurrency)
+        self.temperature = float(temperature)
+        self.max_tokens = int(max_tokens)
+        self.system_prompt = system_prompt
+        self.seed = seed
+        host = urlparse(base_url).netloc if base_url else ""
+        self.label = f"openai:{model}" + (f"@{host}" if host else "")
+        self._client: Any = None
+        self._client = self._make_client()  # fail early when the key is missing
+
+    # The key lives only inside the client, which is rebuilt from the environment when needed.
+    def _make_client(self) -> Any:
+        import openai
+
+        key = os.environ.get(self.api_key_env)
+        if not key:
+            if self.base_url is None:
+                raise ValueError(
+                    f"no API key: set the {self.api_key_env} environment variable "
+                    "(or give base_url for a server that needs none)"
+                )
+            key = NO_KEY
+        return openai.OpenAI(
+            api_key=key, base_url=self.base_url, timeout=self.timeout_s, max_retries=0
+        )
+
+    @property
+    def client(self) -> Any:
+        """The ``openai.OpenAI`` client (created from the environment on first use)."""
+        if self._client is None:
+            self._client = self._make_client()
+        return self._client
+
+    def settings_key(self) -> str:
+        """Generation settings that change answers (not timeouts or concurrency)."""
+        settings = {
+            "temperature": self.temperature,
+            "max_tokens": self.max_tokens,
+            "system_prompt": self.system_prompt,
+            "seed": self.seed,
+        }
+        return json.dumps(settings, sort_keys=True)
+
+    def advise(self, prompts: list[str]) -> list[Answer]:
+        """Answers in prompt order, at most ``concurrency`` requests at a time; never raises."""
+        if not prompts:
+            return []
+        try:
+            client = self.client
+        except Exception as exc:  # noqa: BLE001
+            return [error_answer(f"{type(exc).__name__}: {exc}") for _ in prompts]
+        if len(prompts) == 1 or self.concurrency == 1:
+            return [self._ask(client, p) for p in prompts]
+        with ThreadPoolExecutor(max_workers=min(self.concurrency, len(prompts))) as pool:
+            return list(pool.map(lambda p: self._ask(client, p), prompts))
+
+    def _messages(self, prompt: str) -> list[dict[str, str]]:
+        messages = [{"role": "user", "content": prompt}]
+        if self.system_prompt is not None:
+            messages.insert(0, {"role": "system", "content": self.system_prompt})
+        return messages
+
+    def _ask(self, client: Any, prompt: str) -> Answer:
+        """One prompt, with retries; every failure becomes an error answer."""
+        import openai
+
+        started = time.perf_counter()
+        request: dict[str, Any] = {
+            "model": self.model,
+            "messages": self._messages(prompt),
+            "temperature": self.temperature,
+            "max_tokens": self.max_tokens,
+        }
+        if self.seed is not None:
+            request["seed"] = self.seed
+        attempt = 0
+        while True:
+            try:
+                response = client.chat.completions.create(**request)
+                break
+            except Exception as exc:  # noqa: BLE001 - classified below, never raised
+                retryable = isinstance(
+                    exc,
+                    openai.RateLimitError | openai.APIConnectionError | openai.InternalServerError,
+                ) or (isinstance(exc, openai.APIStatusError) and exc.status_code >= 500)
+                if not retryable or attempt >= self.max_retries:
+                    elapsed = time.perf_counter() - started
+                    return error_answer(_describe(exc, attempt + 1, client.api_key), elapsed)
+                delay = self._delay(attempt, exc)
+                log.debug("retrying after %s in %.2f s", type(exc).__name__, delay)
+                time.sleep(delay)
+                attempt += 1
+        elapsed = time.perf_counter() - started
+        try:
+            choice = response.choices[0]
+            text = choice.message.content or ""
+            usage = getattr(response, "usage", None)
+            prompt_tokens = int(getattr(usage, "prompt_tokens", 0) or 0)
+            completion_tokens = int(getattr(usage, "completion_tokens", 0) or 0)
+        except Exception as exc:  # noqa: BLE001 - a malformed response is a failed call
+            return error_answer(f"malformed response: {type(exc).__name__}: {exc}", elapsed)
+        return Answer(
+            text=text,
+            recommendation=parse_recommendation(text),
+            latency_s=elapsed,
+            prompt_tokens=prompt_tokens,
+            completion_tokens=completion_tokens,
+        )
+
+    def _delay(self, attempt: int, exc: Exception) -> float:
+        delay = min(self.max_backoff_s, self.backoff_s * 2**attempt)
+        response = getattr(exc, "response", None)
+        headers = getattr(response, "headers", None)
+        if headers is not None:
+            try:
+                retry_after = float(headers.get("retry-after", ""))
+                delay = min(self.max_backoff_s, max(delay, retry_after))
+            except (TypeError, ValueError):
+                pass
+        return delay * (1.0 + 0.1 * random.random())
+
+    def close(self) -> None:
+        """Close the HTTP client."""
+        if self._client is not None:
+            try:
+                self._client.close()
+            finally:
+                self._client = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_client"] = None  # never pickle the key; rebuilt from the environment
+        return state
+
+    def __repr__(self) -> str:
+        return f"OpenAIAdvisor(model={self.model!r}, base_url={self.base_url!r})"
+
+
+_KEY_LIKE = re.compile(r"\b(sk|key|token)[-_][A-Za-z0-9_\-*]{6,}", re.IGNORECASE)
+
+
+def _describe(exc: Exception, attempts: int, secret: str | None = None) -> str:
+    """A short error text; anything that looks like a key is masked."""
+    status = getattr(exc, "status_code", None)
+    kind = type(exc).__name__ + (f" {status}" if status else "")
+    message = str(exc).splitlines()[0][:200] if str(exc) else ""
+    if secret and secret != NO_KEY:
+        message = message.replace(secret, "***")
+    message = _KEY_LIKE.sub("***", message)
+    return f"{kind} after {attempts} attempt(s)" + (f": {message}" if message else "")
