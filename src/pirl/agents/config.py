@@ -257,6 +257,7 @@ def _validate(cfg: RunConfig) -> None:
         "ppo.device": (p.device, ("auto", "cpu", "cuda")),
         "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
         "pare.mode": (pare.mode, ("sync", "async")),
+        "pare.prompt_variant": (pare.prompt_variant, ("paper", "compact")),
     }
     for key, (value, allowed) in choices.items():
         if value not in allowed:

@@ -71,11 +71,13 @@ def load_policy(
     seed: int | None = None,
     device: str = "cpu",
     max_calls: int = 0,
+    prompt_variant: str = "paper",
 ) -> Policy:
     """A policy from a run folder (PPO methods, IL) or a built-in method name.
 
     Built-ins: ``boustrophedon``, ``random`` and ``llm-only`` (which needs ``advisor``;
-    ``max_calls`` limits its LLM calls per episode, 0 = no limit).
+    ``max_calls`` limits its LLM calls per episode, 0 = no limit; ``prompt_variant`` picks
+    the prompt).
     """
     if str(source) in BUILTIN:
         name = str(source)
@@ -89,7 +91,7 @@ def load_policy(
             raise ConfigError("llm-only needs an advisor")
         from pirl.agents.llm_only import LLMOnlyPolicy
 
-        return LLMOnlyPolicy(advisor, max_calls=max_calls)
+        return LLMOnlyPolicy(advisor, prompt_variant, max_calls=max_calls)
     run = Path(source)
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")

@@ -91,7 +91,11 @@ def _policy(spec: MethodSpec, config: RunConfig) -> Any:
 
             advisor = make_advisor(spec.advisor, config)
         _POLICIES[cache_key] = load_policy(
-            spec.source, advisor=advisor, seed=0, max_calls=spec.max_calls
+            spec.source,
+            advisor=advisor,
+            seed=0,
+            max_calls=spec.max_calls,
+            prompt_variant=config.pare.prompt_variant,
         )
     return _POLICIES[cache_key]
 
