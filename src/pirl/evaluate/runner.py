@@ -181,7 +181,7 @@ def evaluate(
             if progress:
                 progress(done, total)
     else:
-        factory = executor_factory or _process_pool
+        factory = executor_factory or process_pool
         with factory(workers) as pool:
             futures = {
                 pool.submit(run_chunk, spec, env_dict, config_dict, size, sim, seeds): len(seeds)
@@ -211,7 +211,7 @@ def evaluate(
     return out / "summary.csv"
 
 
-def _process_pool(workers: int) -> ProcessPoolExecutor:
+def process_pool(workers: int) -> ProcessPoolExecutor:
     # spawn: workers must not inherit the parent's threads (torch, an LLM, numba).
     return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
 
