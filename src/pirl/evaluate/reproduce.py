@@ -7,6 +7,7 @@ resume from their last checkpoint, so an interrupted reproduction picks up where
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 import time
@@ -33,12 +34,34 @@ def _run_state(run: Path) -> str:
     return "broken" if run.exists() else "absent"
 
 
-def train_all(
-    cfg: RunConfig, out: Path, advisor: str, log: Log, show_progress: bool = True
-) -> list[Path]:
-    """Train (or resume, or skip) every method x seed; returns the finished run folders."""
+def train_one(
+    method: str, adv: str, seed: int, cfg: RunConfig, run: Path, resume: bool, show_progress: bool
+) -> None:
+    """One run of the plan (also what a Ray worker calls; see pirl.evaluate.distributed)."""
     from pirl.agents.imitation import train_il
     from pirl.agents.train import train
+
+    if method == "il":
+        expert = run.parent / f"ppo-ewri-s{seed}"
+        train_il(cfg, expert, run, seed=seed, resume=run.exists())
+    else:
+        run_cfg = cfg.with_overrides(pare={"advisor": adv}) if adv else cfg
+        train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
+
+
+def train_all(
+    cfg: RunConfig,
+    out: Path,
+    advisor: str,
+    log: Log,
+    show_progress: bool = True,
+    ray_address: str | None = None,
+) -> list[Path]:
+    """Train (or resume, or skip) every method x seed; returns the finished run folders.
+
+    With ``ray_address`` the runs go to Ray in parallel (IL after its PPO-EWRI expert).
+    """
+    from pirl.evaluate.distributed import TrainJob, train_on_ray
 
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
@@ -49,6 +72,7 @@ def train_all(
             plan.append(("pirl", "oracle", seed))
         plan.append(("il", "", seed))
     finished = []
+    remote: list[TrainJob] = []
     for method, adv, seed in plan:
         name = f"{method}{'-' + adv if adv else ''}-s{seed}"
         run = runs_dir / name
@@ -62,15 +86,15 @@ def train_all(
             shutil.rmtree(run)
         resume = state == "resumable"
         log(f"{name}: {'resuming' if resume else 'training'}")
-        start = time.perf_counter()
-        if method == "il":
-            expert = runs_dir / f"ppo-ewri-s{seed}"
-            train_il(cfg, expert, run, seed=seed, resume=run.exists())
-        else:
-            run_cfg = cfg.with_overrides(pare={"advisor": adv}) if adv else cfg
-            train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
-        log(f"{name}: done in {time.perf_counter() - start:.0f} s")
         finished.append(run)
+        if ray_address:
+            remote.append(TrainJob(name, method, adv, seed, run, resume))
+            continue
+        start = time.perf_counter()
+        train_one(method, adv, seed, cfg, run, resume, show_progress)
+        log(f"{name}: done in {time.perf_counter() - start:.0f} s")
+    if ray_address:
+        train_on_ray(ray_address, cfg, remote, log)
     return finished
 
 
@@ -92,7 +116,13 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
     gifs = {}
     for spec in specs:
         adv = make_advisor(spec.advisor, cfg) if spec.advisor else None
-        policy = load_policy(spec.source, advisor=adv, seed=0, max_calls=spec.max_calls)
+        policy = load_policy(
+            spec.source,
+            advisor=adv,
+            seed=0,
+            max_calls=spec.max_calls,
+            prompt_variant=cfg.pare.prompt_variant,
+        )
         result = run_episode(env, policy, seed, record=True, frame_every=cfg.reproduce.gif_every)
         gifs[f"{spec.label}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
             result.frames, folder / f"{spec.key}.gif", fps=12
@@ -108,8 +138,12 @@ def reproduce(
     log: Log = print,
     progress: Callable[[int, int], None] | None = None,
     show_progress: bool = True,
+    ray_address: str | None = None,
 ) -> Path:
-    """The main job. Returns the path of ``report.html``."""
+    """The main job. Returns the path of ``report.html``.
+
+    ``ray_address`` sends training runs and evaluation episodes to Ray (``pirl[distributed]``).
+    """
     from pirl.agents.train import git_commit
     from pirl.evaluate.report import write_report
 
@@ -117,7 +151,7 @@ def reproduce(
         raise ConfigError(f"--advisor {advisor!r}: allowed values are local, openai, oracle")
     out = Path(out)
     started = time.perf_counter()
-    runs = train_all(cfg, out, advisor, log, show_progress)
+    runs = train_all(cfg, out, advisor, log, show_progress, ray_address)
     trained_s = time.perf_counter() - started
     rp = cfg.reproduce
     specs = [spec_for_run(r) for r in runs]
@@ -135,7 +169,14 @@ def reproduce(
         episodes_per_method={"llm-only": rp.llm_only_episodes},
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
-    summary = evaluate(plan, out / "eval", workers or rp.workers, progress=progress)
+    factory = None
+    if ray_address:
+        from pirl.evaluate.distributed import ray_executor
+
+        factory = functools.partial(ray_executor, ray_address)
+    summary = evaluate(
+        plan, out / "eval", workers or rp.workers, progress=progress, executor_factory=factory
+    )
     log("recording animations")
     gifs = record_gifs(cfg, runs, advisor, out / "report" / "gifs")
     stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl")
