@@ -11,7 +11,10 @@ Flow of one step (``mode="sync"``, the paper's timing):
 3. The prompts for ``s_{t+1}`` go out at once.
 
 ``mode="async"`` never waits: each world uses the freshest answer that has arrived (reporting
-how many steps stale it is), and a new batch is sent whenever none is in flight.
+how many steps stale it is), and a new batch is sent whenever none is in flight. When the LLM
+is slower than an episode, that answer may come from an earlier episode of the same world;
+it is still used (its move as a direction, its camera as a target) and counted in
+``answers_cross_episode``. Sync mode only uses advice about the current episode.
 
 Between queries (``query_every`` K > 1) the last advice is reused: its move is read as a
 direction from the current position, its camera as a target. A failed, late or unparseable
@@ -110,6 +113,7 @@ class PareStats:
     answers_unparseable: int = 0
     answers_late: int = 0
     answers_cached: int = 0
+    answers_cross_episode: int = 0
     steps_fresh: int = 0
     steps_cached: int = 0
     steps_stale: int = 0
@@ -250,7 +254,12 @@ class PAREVecEnv(VecEnvWrapper):
                 self.stats.answers_ok += 1
                 self.stats.answers_cached += int(answer.from_cache)
             if episode != self._episode[e]:
-                continue  # that episode is over
+                if self.mode == "sync":
+                    continue  # that episode is over
+                # Async uses the freshest answer that has arrived, even one asked in an
+                # earlier episode of this world: a slow LLM's answers may never arrive within
+                # one episode. Its staleness says so.
+                self.stats.answers_cross_episode += 1
             rec = answer.recommendation
             if rec is None:
                 self._has_rec[e] = False
@@ -315,7 +324,8 @@ class PAREVecEnv(VecEnvWrapper):
             ended = np.flatnonzero(dones)
             self._episode[ended] += 1
             self._episode_step[ended] = 0
-            self._has_rec[ended] = False
+            if self.mode == "sync":
+                self._has_rec[ended] = False
             self._want[ended] = False
         self._send_due()
         return obs, rewards, dones, infos
