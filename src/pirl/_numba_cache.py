@@ -13,7 +13,7 @@ import os
 import shutil
 from pathlib import Path
 
-_KERNEL_PACKAGES = ("world", "env")
+_KERNEL_PACKAGES = ("world", "env", "pare", "physics")
 _KEEP = 3
 
 
@@ -24,7 +24,7 @@ def configure() -> Path | None:
     root = Path(__file__).resolve().parent
     digest = hashlib.sha256()
     for package in _KERNEL_PACKAGES:
-        for path in sorted((root / package).glob("*.py")):
+        for path in sorted((root / package).rglob("*.py")):
             digest.update(path.name.encode())
             digest.update(path.read_bytes())
     base = Path(
