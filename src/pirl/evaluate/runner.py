@@ -23,7 +23,7 @@ from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import write_summary
 from pirl.world.config import ConfigError, VCPPConfig
 
-SIMS = ("grid",)
+SIMS = ("grid", "physics")
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,12 @@ def run_chunk(
     records = []
     for seed in seeds:
         calls_before = getattr(policy, "calls", 0)
-        result = run_episode(env, policy, seed)
+        if sim == "physics":
+            from pirl.physics import run_physics_episode
+
+            metrics = run_physics_episode(env_cfg, policy, seed)
+        else:
+            metrics = run_episode(env, policy, seed).metrics
         records.append(
             {
                 "method": spec.key,
@@ -132,7 +137,7 @@ def run_chunk(
                 "seed": seed,
                 "train_seed": spec.train_seed,
                 "source": spec.source,
-                **result.metrics,
+                **metrics,
                 "llm_calls": getattr(policy, "calls", 0) - calls_before,
             }
         )

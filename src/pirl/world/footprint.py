@@ -112,8 +112,8 @@ def footprint_cells(
 
     ``out`` must hold at least :func:`max_footprint_cells` rows.
     """
-    n = 0
     if model == PAPER:
+        n = 0
         h = paper_half_width(tilt, zoom10)
         for i in range(max(0, x - h), min(size_x, x + h + 1)):
             for j in range(max(0, y - h), min(size_y, y + h + 1)):
@@ -123,10 +123,18 @@ def footprint_cells(
         return n
     poly = np.empty((4, 2))
     _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, poly)
+    return frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out)
+
+
+@numba.njit(cache=True)
+def frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out):
+    """Write the ground cells inside ground polygon ``poly`` (seen from a camera at x, y, z,
+    occlusion optional) as rows of ``out``; return their count."""
     x0 = max(0, int(math.floor(poly[:, 0].min())))
     x1 = min(size_x - 1, int(math.ceil(poly[:, 0].max())))
     y0 = max(0, int(math.floor(poly[:, 1].min())))
     y1 = min(size_y - 1, int(math.ceil(poly[:, 1].max())))
+    n = 0
     for i in range(x0, x1 + 1):
         for j in range(y0, y1 + 1):
             if _inside(i, j, poly):

@@ -1,0 +1,75 @@
+"""Physics backend throughput: simulated seconds per wall second and episodes per minute.
+
+Flies whole episodes of the PyFlyt backend (``pirl evaluate --sim physics``) at 30x30x3 with a
+planner (boustrophedon) and/or random actions, one process, and prints per policy the steps,
+simulated seconds and wall seconds per episode, the real-time factor (simulated seconds per
+wall second) and episodes per minute. PyFlyt's one-off numba compilation is paid by a warm-up
+flight first and reported apart. CPU time is printed too: on a shared machine the wall time
+depends on the neighbours. Usage::
+
+    python benchmarks/physics_throughput.py [--episodes 3] [--policy boustrophedon random]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from pirl.agents.boustrophedon import BoustrophedonPolicy
+from pirl.agents.policy import Policy, RandomPolicy
+from pirl.physics import PhysicsConfig, run_physics_episode
+from pirl.world.config import VCPPConfig
+
+
+def make_policy(name: str, seed: int) -> Policy:
+    return BoustrophedonPolicy() if name == "boustrophedon" else RandomPolicy(seed)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=3, help="episodes per policy")
+    parser.add_argument("--size", type=int, nargs=3, default=(30, 30, 3))
+    parser.add_argument(
+        "--policy", nargs="+", default=["boustrophedon", "random"], help="boustrophedon, random"
+    )
+    args = parser.parse_args()
+    physics = PhysicsConfig()
+    size = tuple(args.size)
+    cfg = VCPPConfig(size=size)
+
+    start = time.perf_counter()
+    run_physics_episode(
+        VCPPConfig(size=(5, 5, 3), max_steps=3, scale_by_alpha=False), RandomPolicy(0), 0, physics
+    )
+    warm = time.perf_counter() - start
+    print(f"warm-up (PyFlyt's numba compilation, once per process): {warm:.1f} s")
+    print(
+        f"{'x'.join(map(str, size))}, physics {physics.physics_hz} Hz, control "
+        f"{physics.control_hz} Hz, wind {physics.wind_mean} m/s + gusts {physics.wind_gust} m/s"
+    )
+    print(
+        f"{'policy':>13} {'steps':>6} {'sim s':>7} {'wall s':>7} {'cpu s':>6} {'sim s/wall s':>12}"
+        f" {'episodes/min':>12} {'VCR':>5} {'battery':>7} {'timeouts':>8}"
+    )
+    for name in args.policy:
+        steps = sim = wall = cpu = vcr = battery = timeouts = 0.0
+        for seed in range(args.episodes):
+            w0, c0 = time.perf_counter(), time.process_time()
+            m = run_physics_episode(cfg, make_policy(name, seed), seed, physics)
+            wall += time.perf_counter() - w0
+            cpu += time.process_time() - c0
+            steps += m["steps"]
+            sim += m["sim_seconds"]
+            vcr += m["vcr"]
+            battery += m["battery_left"]
+            timeouts += m["timeouts"]
+        n = args.episodes
+        print(
+            f"{name:>13} {steps / n:>6.0f} {sim / n:>7.1f} {wall / n:>7.1f} {cpu / n:>6.1f}"
+            f" {sim / wall:>12.1f} {60 * n / wall:>12.2f} {vcr / n:>5.2f} {battery / n:>7.2f}"
+            f" {timeouts / n:>8.1f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

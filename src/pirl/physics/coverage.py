@@ -1,0 +1,94 @@
+"""Coverage from a continuous pose, with the grid's footprint geometry.
+
+The grid evaluates its footprint models (:mod:`pirl.world.footprint`) at a cell centre with a
+level camera. A flying drone is between cells, and its body tilts the camera. This module
+evaluates the same models from a continuous pose, reusing the grid's compiled geometry (the
+frustum's corner rays, the point-in-polygon test, the occlusion test):
+
+- ``paper``: the square of side ``2h + 1`` cells centred on the continuous (x, y) holds the
+  cells whose centres lie in ``[x - h - 1/2, x + h + 1/2)``: exactly the grid's square around
+  the nearest cell (halves rounded up). Tilt enters only through ``h`` (the model's rule), so
+  the commanded tilt is used and the attitude does not matter, as in the paper's model.
+- ``frustum``: the pinhole camera at the continuous position and height, pointed by the
+  *effective* tilt and pan of its optical axis once the body's roll, pitch and yaw are applied
+  to the gimbal angles (:func:`view_angles`). The image's roll about the optical axis is
+  ignored (the frustum model has no such angle); it is small at the drone's lean angles.
+
+At a cell centre with a level body both give exactly the grid's footprint (tested).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from pirl.world.footprint import PAPER, _frustum_corners, footprint_cells, frustum_scan
+
+
+@numba.njit(cache=True)
+def footprint_cells_pose(
+    model, x, y, z, tilt, pan, zoom10, size_x, size_y, fov_deg, max_range, occlusion,
+    obstacles, n_obs, out,
+):  # fmt: skip
+    """Ground cells seen from a continuous pose, written as rows (i, j) of ``out``; the count.
+
+    ``x, y`` are in cell units (cell (i, j) is centred at (i, j)); ``z`` is the height above
+    the ground in cell units minus one (the grid's level convention, so level k is ``z = k``);
+    ``tilt`` and ``pan`` are degrees (floats); ``obstacles`` in the same units.
+    """
+    if model == PAPER:
+        return footprint_cells(
+            PAPER, int(math.floor(x + 0.5)), int(math.floor(y + 0.5)), 0,
+            int(math.floor(tilt + 0.5)), 0, zoom10, size_x, size_y, fov_deg, max_range, False,
+            obstacles, n_obs, out,
+        )  # fmt: skip
+    poly = np.empty((4, 2))
+    _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, poly)
+    return frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out)
+
+
+def body_rotation(rpy: np.ndarray) -> np.ndarray:
+    """Rotation body -> world for (roll, pitch, yaw) radians: Rz(yaw) @ Ry(pitch) @ Rx(roll).
+
+    The convention of PyBullet's ``getEulerFromQuaternion`` and of Webots' inertial unit.
+    """
+    roll, pitch, yaw = (float(a) for a in rpy)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def view_angles(tilt: float, pan: float, rpy: np.ndarray, stabilized: bool) -> tuple[float, float]:
+    """Effective (tilt, pan) in degrees of a gimbal camera on a tilted body.
+
+    The gimbal's yaw axis is driven to the commanded world-frame ``pan`` (it compensates the
+    body's heading); its pitch axis holds ``tilt`` below the body's horizontal plane, so body
+    roll and pitch tilt the view unless the gimbal is ``stabilized`` (3-axis). Pan is read off
+    the camera's right axis and tilt measured towards that heading, so a camera looking
+    straight down keeps a well-defined footprint orientation, and one pitched past the nadir
+    gets a tilt above 90 degrees.
+    """
+    if stabilized:
+        return float(tilt), float(pan)
+    t = math.radians(tilt)
+    rel = math.radians(pan) - float(rpy[2])
+    forward = np.array([math.cos(t) * math.cos(rel), math.cos(t) * math.sin(rel), -math.sin(t)])
+    right = np.array([math.sin(rel), -math.cos(rel), 0.0])
+    rot = body_rotation(rpy)
+    f = rot @ forward
+    r = rot @ right
+    p_eff = math.atan2(r[0], -r[1])
+    t_eff = math.atan2(-f[2], f[0] * math.cos(p_eff) + f[1] * math.sin(p_eff))
+    return math.degrees(t_eff), math.degrees(p_eff)
+
+
+__all__ = ["body_rotation", "footprint_cells_pose", "view_angles"]

@@ -1,0 +1,467 @@
+"""The mission logic every physics backend shares: waypoints, coverage, battery, metrics.
+
+A :class:`Mission` turns the policy's grid actions into waypoints for a flying drone and turns
+the drone's flight back into the grid's bookkeeping, so that PyFlyt and Webots run the same
+rules and only differ in how they fly. It keeps a :class:`~pirl.world.state.WorldBatch` of one
+world as its grid-level state: the policy's observation comes from the grid's own builder
+(:func:`pirl.env.observation.build_observations`) and its metrics from
+:func:`pirl.world.metrics.episode_metrics`, so nothing here re-implements either.
+
+One step, as a backend drives it::
+
+    plan = mission.begin_step(action)           # camera change or a new waypoint
+    while not mission.update(dt, pose, power, contact):
+        fly towards mission.target_position()   # the backend's physics, dt at a time
+    obs, terminated, truncated, info = mission.end_step(pose)
+
+Rules (DESIGN.md sections 3 and 10; docs/physics.md):
+
+- **Waypoints.** A move targets the centre of the neighbouring cell of the cell the drone is
+  in now (its position rounded to the grid), so wind drift is part of what the policy sees. A
+  move out of the grid is refused by the geofence: no flight, one collision (as in the grid).
+  A move into an obstacle is flown; the contact is the collision, and the drone is sent back
+  to the cell it came from. A move ends when the drone is within ``tolerance_m`` of its
+  waypoint, or after ``step_timeout_s`` (a timeout). A camera action changes tilt, pan or zoom
+  exactly as in the grid and holds the drone at its cell for ``camera_hold_s``.
+- **Coverage.** The footprint is evaluated from the continuous pose (:mod:`.coverage`) at
+  ``sample_hz`` during the step and once at its end; the step's view is the union of its
+  samples and is booked like one grid view (new cells, views, redundant cells).
+- **Battery.** ``energy_per_hover_s`` units per second of hover-equivalent power, where the
+  power relative to hover is the mean cube of the rotors' speed relative to hover speed
+  (:func:`normalized_power`), plus ``camera_energy`` per camera action. Same capacity, step
+  limit and BE formula as the grid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+
+from pirl.env.info import InfoSnapshot
+from pirl.env.observation import build_observations, obs_size
+from pirl.physics.config import PhysicsConfig
+from pirl.physics.coverage import footprint_cells_pose, view_angles
+from pirl.world import dynamics as D
+from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
+from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows
+from pirl.world.metrics import episode_metrics
+from pirl.world.planning import MOVE_DELTAS
+from pirl.world.state import Scenario, WorldBatch, draw_scenario
+
+Cell = tuple[int, int, int]
+
+MOVE, CAMERA, REFUSED = "move", "camera", "refused"
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A drone's pose: position in metres (world frame, z up) and attitude in radians.
+
+    ``rpy`` is (roll, pitch, yaw) with body -> world rotation Rz(yaw) Ry(pitch) Rx(roll).
+    """
+
+    position: np.ndarray
+    rpy: np.ndarray
+
+    @classmethod
+    def level(cls, position: np.ndarray | tuple[float, float, float]) -> Pose:
+        """A level pose (zero roll, pitch and yaw) at ``position``."""
+        return cls(np.asarray(position, dtype=np.float64), np.zeros(3))
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """What one policy action asks of the drone."""
+
+    action: int
+    kind: str
+    """``move`` (fly to ``target``), ``camera`` (hold ``origin``) or ``refused`` (geofence)."""
+    origin: Cell
+    target: Cell
+    camera: tuple[int, int, int]
+    """(tilt degrees, pan degrees, zoom tenths) for this step."""
+
+
+def normalized_power(speed_ratios: np.ndarray) -> float:
+    """Electrical power relative to hover, from each rotor's speed relative to hover speed.
+
+    Momentum theory: a rotor's induced power grows as thrust^1.5 and its thrust as speed^2,
+    so its power grows as speed^3. The mean over rotors is 1.0 in a steady hover.
+    """
+    r = np.abs(np.asarray(speed_ratios, dtype=np.float64))
+    return float(np.dot(r * r, r)) / r.size
+
+
+def touching(position: np.ndarray, spheres_m: np.ndarray, body_radius_m: float) -> bool:
+    """Whether a body of ``body_radius_m`` at ``position`` touches a sphere (rows cx, cy, cz, r).
+
+    The geometric contact test for backends that do not report contacts themselves.
+    """
+    if not len(spheres_m):
+        return False
+    d = np.linalg.norm(spheres_m[:, :3] - np.asarray(position)[None, :], axis=1)
+    return bool((d <= spheres_m[:, 3] + body_radius_m).any())
+
+
+class Mission:
+    """One episode's grid-level state, advanced by a physics backend (see the module doc)."""
+
+    def __init__(self, env_cfg: VCPPConfig, physics: PhysicsConfig | None = None) -> None:
+        self.cfg = env_cfg
+        self.physics = physics or PhysicsConfig()
+        self.world = WorldBatch(env_cfg, 1)
+        if self.world.step_limit < 1:
+            raise ConfigError(
+                f"size={env_cfg.size}, max_steps={env_cfg.max_steps}: the step limit scaled by "
+                f"alpha={env_cfg.alpha:.3g} rounds to 0; raise max_steps or set scale_by_alpha"
+            )
+        self.model = PAPER if env_cfg.footprint == "paper" else FRUSTUM
+        self.obs = np.zeros((1, obs_size(env_cfg.obs_window, env_cfg.obs_global)), np.float32)
+        self._buf = np.empty((buffer_rows(self.model, env_cfg.max_range), 2), dtype=np.int64)
+        self._weights = np.zeros((1, len(REWARD_TERMS)))
+        self._seen = np.zeros(env_cfg.size[:2], dtype=np.bool_)
+        self._index = np.array([0], dtype=np.int64)
+        p = self.physics
+        self._camera_energy = env_cfg.energy_camera if p.camera_energy is None else p.camera_energy
+        self._sample_period = 1.0 / p.sample_hz
+        self.scenario: Scenario | None = None
+        self.plan: StepPlan | None = None
+
+    # -- geometry -------------------------------------------------------------------------
+    def cell_position(self, cell: Cell | np.ndarray) -> np.ndarray:
+        """Centre of ``cell`` in metres: (i, j) * cell size, (k + 1) * level height."""
+        p = self.physics
+        i, j, k = (float(c) for c in cell)
+        return np.array([i * p.cell_size_m, j * p.cell_size_m, (k + 1.0) * p.level_height_m])
+
+    def cell_coords(self, position: np.ndarray) -> np.ndarray:
+        """Continuous grid coordinates (x, y, level) of a position in metres."""
+        p = self.physics
+        x, y, z = (float(v) for v in position)
+        return np.array([x / p.cell_size_m, y / p.cell_size_m, z / p.level_height_m - 1.0])
+
+    def nearest_cell(self, position: np.ndarray) -> Cell:
+        """The grid cell the drone is in: its position rounded (halves up), kept in the grid."""
+        c = np.floor(self.cell_coords(position) + 0.5).astype(np.int64)
+        size = self.cfg.size
+        return tuple(int(min(max(c[a], 0), size[a] - 1)) for a in range(3))  # type: ignore[return-value]
+
+    def obstacle_spheres_m(self) -> np.ndarray:
+        """The scenario's obstacles as spheres in metres: rows (cx, cy, cz, radius)."""
+        if self.scenario is None:
+            raise RuntimeError("call reset() first")
+        out = np.zeros((len(self.scenario.obstacles), 4))
+        for k, (cx, cy, cz, r) in enumerate(self.scenario.obstacles):
+            out[k, :3] = self.cell_position((cx, cy, cz))
+            out[k, 3] = r * self.physics.cell_size_m
+        return out
+
+    def camera(self) -> tuple[int, int, int]:
+        """The gimbal's setting now: (tilt degrees, pan degrees, zoom tenths)."""
+        row = self.world.ints[0]
+        return int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
+
+    def target_position(self) -> np.ndarray:
+        """The waypoint the drone should fly to now, metres."""
+        return self._target_m
+
+    # -- episode --------------------------------------------------------------------------
+    def reset(
+        self, seed: int | None = None, scenario: Scenario | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """New episode: the scenario of ``seed`` exactly as ``VCPPEnv.reset(seed=seed)`` draws
+        it (or a given one); returns the first observation and info."""
+        if scenario is None:
+            scenario = scenario_for_seed(self.cfg, seed)
+        self.scenario = scenario
+        # The drone starts level at the start cell's centre, so the grid's first view (taken
+        # by load_scenario) is exactly the view from the drone's pose.
+        self.world.load_scenario(0, scenario)
+        p = self.physics
+        # Obstacles in the footprint's units (heights in cell sizes, ground at -1) for occlusion.
+        obs = np.asarray(scenario.obstacles, dtype=np.float64).reshape(-1, 4).copy()
+        obs[:, 2] = (obs[:, 2] + 1.0) * p.level_height_m / p.cell_size_m - 1.0
+        self._geo_obstacles = obs if len(obs) else np.zeros((1, 4))
+        self._n_obs = len(obs)
+        self.start = tuple(int(v) for v in scenario.start)
+        self._target_m = self.cell_position(self.start)
+        self.sim_seconds = 0.0
+        self.timeouts = 0
+        self.recoveries = 0
+        self.contacts = 0
+        self.geofence = 0
+        self.energy_used = 0.0
+        self._track_sum = 0.0
+        self._steps_done = 0
+        self.plan = None
+        self.done = False
+        self._in_contact = False
+        return self._observation(), self._info()
+
+    # -- one step -------------------------------------------------------------------------
+    def begin_step(self, action: int) -> StepPlan:
+        """Apply ``action`` to the grid-level state; the plan says what to fly."""
+        if self.scenario is None:
+            raise RuntimeError("call reset() first")
+        if self.done:
+            raise RuntimeError("the episode is over; call reset()")
+        action = int(action)
+        if not 0 <= action < D.N_ACTIONS:
+            raise ValueError(f"action must be an integer in [0, {D.N_ACTIONS}); got {action}")
+        row = self.world.ints[0]
+        origin: Cell = (int(row[D.PX]), int(row[D.PY]), int(row[D.PZ]))
+        tilt, pan, zoom = int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
+        self._camera_before = (tilt, pan, zoom)
+        kind, target = CAMERA, origin
+        if action < 6:
+            d = MOVE_DELTAS[action]
+            cand = (origin[0] + d[0], origin[1] + d[1], origin[2] + d[2])
+            inside = all(0 <= c < s for c, s in zip(cand, self.cfg.size, strict=True))
+            kind, target = (MOVE, cand) if inside else (REFUSED, origin)
+        else:
+            # The grid's camera rules: steps of 5 degrees, 15 degrees, 0.1; limits hold.
+            if action == 6:
+                tilt = min(90, tilt + 5)
+            elif action == 7:
+                tilt = max(0, tilt - 5)
+            elif action == 8:
+                pan = min(90, pan + 15)
+            elif action == 9:
+                pan = max(-90, pan - 15)
+            elif action == 10:
+                zoom = min(20, zoom + 1)
+            else:
+                zoom = max(5, zoom - 1)
+            row[D.TILT], row[D.PAN], row[D.ZOOM] = tilt, pan, zoom
+            row[D.CAM_ACTIONS] += 1
+        self.plan = StepPlan(action, kind, origin, target, (tilt, pan, zoom))
+        self._target_blocked = bool(self.world.blocked[0][target])
+        self._bounced = False
+        self._target_m = self.cell_position(target)
+        self._t = 0.0
+        self._next_sample = self._sample_period
+        self._power_s = 0.0
+        self._collided = kind == REFUSED
+        self._timed_out = False
+        self._seen[:] = False
+        self._last_fp = 0
+        if kind == REFUSED:
+            self.geofence += 1
+        return self.plan
+
+    def update(self, dt: float, pose: Pose, power: float = 1.0, contact: bool = False) -> bool:
+        """Advance the step by ``dt`` seconds of flight ending at ``pose``; True when it is over.
+
+        ``power`` is the flight power relative to hover over ``dt`` (see
+        :func:`normalized_power`); ``contact`` whether the drone touched an obstacle.
+        """
+        plan = self.plan
+        if plan is None:
+            raise RuntimeError("call begin_step() first")
+        p = self.physics
+        self._t += dt
+        self._power_s += power * dt
+        if contact:
+            # A collision is a contact that begins, or one made pushing into an obstacle cell:
+            # a drone merely resting against a sphere (a free cell can lie closer to a sphere
+            # than the drone's own radius) does not collide again at every step.
+            pushing = plan.kind == MOVE and self._target_blocked
+            if not self._collided and (pushing or not self._in_contact):
+                self._collided = True
+                self.contacts += 1
+            if plan.kind == MOVE and self._target_blocked and not self._bounced:
+                # Bounce back from an obstacle cell to the cell it came from. A move between
+                # free cells that grazes a sphere goes on: the drone slides around it.
+                self._bounced = True
+                self._target_m = self.cell_position(plan.origin)
+        self._in_contact = contact
+        while self._t >= self._next_sample - 1e-9:
+            self.sample(pose)
+            self._next_sample += self._sample_period
+        if plan.kind == MOVE:
+            dist = float(np.linalg.norm(np.asarray(pose.position) - self._target_m))
+            # An obstacle cell's centre lies inside its sphere: that waypoint is never
+            # "reached", the flight ends with the bounce back (or the timeout).
+            reachable = not self._target_blocked or self._bounced
+            if reachable and dist <= p.tolerance_m:
+                return True
+            if self._t >= p.step_timeout_s - 1e-9:
+                self._timed_out = True
+                return True
+            return False
+        return self._t >= p.camera_hold_s - 1e-9
+
+    def footprint(self, pose: Pose, camera: tuple[int, int, int] | None = None) -> np.ndarray:
+        """Ground cells (k, 2) seen from ``pose`` with ``camera`` (default: the current one).
+
+        ``camera`` is (tilt degrees, pan degrees, zoom tenths). The rows live in a buffer
+        that the next call overwrites.
+        """
+        cfg = self.cfg
+        tilt, pan, zoom10 = self.camera() if camera is None else camera
+        x, y, level = self.cell_coords(pose.position)
+        if self.model == PAPER:
+            t_eff, p_eff, z = float(tilt), float(pan), float(level)
+        else:
+            t_eff, p_eff = view_angles(tilt, pan, pose.rpy, self.physics.stabilized_gimbal)
+            # Height above the ground in horizontal cell sizes, minus one (the grid's levels).
+            z = float(pose.position[2]) / self.physics.cell_size_m - 1.0
+        n = footprint_cells_pose(
+            self.model, float(x), float(y), z, t_eff, p_eff, int(zoom10), cfg.size[0],
+            cfg.size[1], cfg.fov_deg, cfg.max_range, cfg.occlusion, self._geo_obstacles,
+            self._n_obs, self._buf,
+        )  # fmt: skip
+        return self._buf[:n]
+
+    def sample(self, pose: Pose) -> int:
+        """Add the view from ``pose`` to this step's view; returns the footprint's size."""
+        cells = self.footprint(pose)
+        self._seen[cells[:, 0], cells[:, 1]] = True
+        self._last_fp = len(cells)
+        return self._last_fp
+
+    def note_recovery(self) -> None:
+        """Count a recovery (the backend put a tumbled drone back at its cell)."""
+        self.recoveries += 1
+
+    def end_step(self, pose: Pose) -> tuple[np.ndarray, bool, bool, dict[str, Any]]:
+        """Book the step: pose, coverage, battery, counters; (obs, terminated, truncated, info)."""
+        plan = self.plan
+        if plan is None:
+            raise RuntimeError("call begin_step() first")
+        w = self.world
+        row = w.ints[0]
+        self.sample(pose)  # the arrival view (a repeat of the last sample costs nothing)
+        cell = self.nearest_cell(pose.position)
+        row[D.PX], row[D.PY], row[D.PZ] = cell
+        moved = cell != plan.origin
+        cam_changed = plan.camera != self._camera_before
+
+        new = self._book_view()
+        used = self.physics.energy_per_hover_s * self._power_s
+        if plan.kind == CAMERA:
+            used += self._camera_energy
+        w.energy[0] -= used
+        self.energy_used += used
+        curiosity = 0.0
+        if moved:
+            w.visits[0, cell[0], cell[1], cell[2]] += 1
+            curiosity = 1.0 / math.sqrt(w.visits[0, cell[0], cell[1], cell[2]])
+        intended = self.nearest_cell(self._target_m)
+        off_target = cell != intended and not self._collided
+        if off_target:
+            row[D.WIND_PUSHES] += 1
+        self._track_sum += float(np.linalg.norm(np.asarray(pose.position) - self._target_m))
+        self._steps_done += 1
+        self.timeouts += int(self._timed_out)
+        self.sim_seconds += self._t
+
+        collision = self._collided
+        redundant = new == 0
+        idle = not moved and not cam_changed and not collision
+        row[D.STEPS] += 1
+        row[D.COLLISIONS] += int(collision)
+        row[D.RED_STEPS] += int(redundant)
+        terms = w.terms[0]
+        terms[:] = 0.0
+        terms[D.T_COVERAGE] = new / w.max_footprint
+        terms[D.T_REDUNDANT] = float(redundant)
+        terms[D.T_BATTERY] = used / self.cfg.energy_move
+        terms[D.T_CAM] = float(cam_changed and new > 0)
+        terms[D.T_CURIOSITY] = curiosity
+        terms[D.T_COLLISION] = float(collision)
+        terms[D.T_IDLE] = float(idle)
+        terminated = bool(w.energy[0] <= 0.0 or row[D.COVERED] >= row[D.COVERABLE])
+        truncated = (not terminated) and int(row[D.STEPS]) >= w.step_limit
+        flags = w.flags[0]
+        flags[D.F_COLLISION], flags[D.F_REDUNDANT], flags[D.F_IDLE] = collision, redundant, idle
+        flags[D.F_TERMINATED], flags[D.F_TRUNCATED] = terminated, truncated
+        flags[D.F_WIND], flags[D.F_NEW] = off_target, new
+        self.done = terminated or truncated
+        self.plan = None
+        return self._observation(), terminated, truncated, self._info()
+
+    # -- results --------------------------------------------------------------------------
+    def metrics(self) -> dict[str, float]:
+        """The grid's episode metrics plus the physics extras (docs/physics.md)."""
+        out: dict[str, float] = episode_metrics(self.world, 0)
+        steps = max(1, self._steps_done)
+        out.update(
+            {
+                "timeouts": self.timeouts,
+                "tracking_error_m": self._track_sum / steps,
+                "sim_seconds": self.sim_seconds,
+                "contacts": self.contacts,
+                "geofence": self.geofence,
+                "recoveries": self.recoveries,
+                "energy_used": self.energy_used,
+            }
+        )
+        return out
+
+    # -- internals ------------------------------------------------------------------------
+    def _book_view(self) -> int:
+        """Book this step's view (the union of its samples) like the grid books one view.
+
+        Mirrors :func:`pirl.world.dynamics.observe`: new cells, views, cells seen twice, the
+        coarse map's counters and, when nothing was new, the redundantly viewed cells.
+        """
+        w = self.world
+        row = w.ints[0]
+        seen = self._seen & w.coverable[0]
+        views = w.views[0]
+        fresh = seen & (views == 0)
+        new = int(fresh.sum())
+        row[D.MULTI_CELLS] += int((seen & (views == 1)).sum())
+        views[seen] += 1
+        ii, jj = np.nonzero(fresh)
+        np.subtract.at(w.blk_todo[0], (w.bx[ii], w.by[jj]), 1)
+        row[D.COVERED] += new
+        row[D.VIEWS] += int(seen.sum())
+        # Footprint size of the arrival view: the analogue of the grid's one view per step.
+        row[D.FOOT_SUM] += self._last_fp
+        if new == 0:
+            red = seen & ~w.redmask[0]
+            w.redmask[0] |= seen
+            row[D.RED_CELLS] += int(red.sum())
+        return new
+
+    def _observation(self) -> np.ndarray:
+        w = self.world
+        build_observations(
+            self._index, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
+            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
+        )  # fmt: skip
+        return self.obs[0].copy()
+
+    def _info(self) -> dict[str, Any]:
+        w = self.world
+        metrics = {0: self.metrics()} if self.done else {}
+        snap = InfoSnapshot(w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics)
+        return snap.info(0)
+
+
+def scenario_for_seed(env_cfg: VCPPConfig, seed: int | None) -> Scenario:
+    """The scenario ``VCPPEnv(env_cfg).reset(seed=seed)`` plays (obstacles, start, wind seed).
+
+    The same generator (Gymnasium's seeding) and the same draws, in the same order.
+    """
+    rng, _ = seeding.np_random(seed)
+    return draw_scenario(env_cfg, rng)
+
+
+__all__ = [
+    "CAMERA",
+    "MOVE",
+    "REFUSED",
+    "Mission",
+    "Pose",
+    "StepPlan",
+    "normalized_power",
+    "scenario_for_seed",
+    "touching",
+]
