@@ -228,7 +228,7 @@ def evaluate(
     ] = None,
     sizes: Annotated[list[str] | None, typer.Option(help="30, 45, 60 or XxYxZ.")] = None,
     episodes: Annotated[int, typer.Option(help="Scenarios per size.")] = 100,
-    sim: Annotated[list[str] | None, typer.Option(help="Simulator(s): grid.")] = None,
+    sim: Annotated[list[str] | None, typer.Option(help="Simulator(s): grid, physics.")] = None,
     out: Annotated[Path, typer.Option(help="Results folder.")] = Path("results/eval"),
     workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
     config: Annotated[

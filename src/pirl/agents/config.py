@@ -150,6 +150,10 @@ class ReproduceSettings:
     """LLM calls allowed per LLM-only episode (0 = no limit); after that it holds still."""
     oracle_pirl: bool = True
     """Also train PIRL with the oracle advisor (a labelled extra, not an LLM)."""
+    physics_sizes: tuple[str, ...] = ("30", "45", "60")
+    """Worlds flown in the physics simulator (empty = no physics table)."""
+    physics_episodes: int = 100
+    """Scenarios per size in the physics simulator (the same seeds as the grid's first ones)."""
     workers: int = 2
     """Evaluation worker processes."""
     gif_every: int = 2
@@ -248,6 +252,7 @@ def _validate(cfg: RunConfig) -> None:
         "reproduce.episodes": cfg.reproduce.episodes,
         "reproduce.llm_only_episodes": cfg.reproduce.llm_only_episodes,
         "reproduce.workers": cfg.reproduce.workers, "reproduce.gif_every": cfg.reproduce.gif_every,
+        "reproduce.physics_episodes": cfg.reproduce.physics_episodes,
     }  # fmt: skip
     for key, value in positive.items():
         if value <= 0:

@@ -167,6 +167,9 @@ def reproduce(
         env=cfg.env,
         config=cfg,
         episodes_per_method={"llm-only": rp.llm_only_episodes},
+        sims=["grid", "physics"] if rp.physics_sizes else ["grid"],
+        sim_sizes={"physics": [parse_size(x) for x in rp.physics_sizes]},
+        sim_episodes={"physics": rp.physics_episodes},
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
     factory = None
@@ -183,7 +186,9 @@ def reproduce(
     notes = [
         f"Profile values: {rp.episodes} scenarios per size ({rp.llm_only_episodes} for "
         f"LLM-only), training seeds {list(rp.seeds)}, {cfg.train.total_steps:,} steps per "
-        f"PPO run. Training took {trained_s / 60:.1f} min, everything "
+        f"PPO run; physics simulator: {rp.physics_episodes} scenarios on "
+        f"{', '.join(rp.physics_sizes) or 'no size'}. "
+        f"Training took {trained_s / 60:.1f} min, everything "
         f"{(time.perf_counter() - started) / 60:.1f} min.",
         "Advisors other than an LLM (the oracle) and planners are labelled as such.",
     ]

@@ -65,7 +65,12 @@ def spec_for_builtin(name: str, advisor: str | None = None, max_calls: int = 0) 
 
 @dataclass
 class EvalPlan:
-    """What to evaluate and how."""
+    """What to evaluate and how.
+
+    ``sim_sizes`` and ``sim_episodes`` override ``sizes`` and ``episodes`` for one simulator
+    (the physics simulator is far slower than the grid). A method's own episode count
+    (``episodes_per_method``) caps either.
+    """
 
     specs: list[MethodSpec]
     sizes: list[tuple[int, int, int]]
@@ -74,6 +79,8 @@ class EvalPlan:
     env: VCPPConfig = field(default_factory=VCPPConfig)
     config: RunConfig = field(default_factory=RunConfig)
     episodes_per_method: dict[str, int] = field(default_factory=dict)
+    sim_sizes: dict[str, list[tuple[int, int, int]]] = field(default_factory=dict)
+    sim_episodes: dict[str, int] = field(default_factory=dict)
 
 
 # -- worker side ---------------------------------------------------------------------------
@@ -148,9 +155,10 @@ def run_chunk(
 def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
     tasks = []
     for spec in plan.specs:
-        episodes = plan.episodes_per_method.get(spec.key, plan.episodes)
         for sim in plan.sims:
-            for size in plan.sizes:
+            episodes = plan.sim_episodes.get(sim, plan.episodes)
+            episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
+            for size in plan.sim_sizes.get(sim, plan.sizes):
                 seeds = scenario_seeds(size, episodes)
                 chunk = max(1, math.ceil(len(seeds) / max(1, 2 * workers)))
                 for i in range(0, len(seeds), chunk):
