@@ -142,6 +142,8 @@ def reproduce(
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total, visible=True)
+            if not console.is_terminal:  # a log file gets plain lines instead of a bar
+                console.print(f"evaluation: {done}/{total} episodes")
 
         report = run_reproduce(
             cfg,
