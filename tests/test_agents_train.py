@@ -94,3 +94,10 @@ def test_config_errors_name_the_key(tmp_path):
     with pytest.raises(ConfigError, match="PPO methods"):
         train("ppo", RunConfig(), tmp_path / "x", show_progress=False)
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("preset", sorted((ROOT / "configs").glob("*.yaml")), ids=lambda p: p.name)
+def test_every_preset_loads(preset):
+    cfg = RunConfig.from_yaml(preset)
+    assert cfg.env.size == (15, 15, 3)  # every profile trains on the paper's world
+    assert cfg.pare.advisor in ("local", "openai", "oracle")
