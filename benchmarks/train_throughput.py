@@ -21,6 +21,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecMonitor
 
+from pirl.advice.factory import make_advisor
 from pirl.agents.config import RunConfig
 from pirl.agents.train import build_env_stack, build_ppo
 from pirl.env import VCPPEnv, make_vec_env
@@ -116,7 +117,8 @@ def main() -> None:
             args.steps,
         )
     )
-    stack = build_env_stack("pirl", cfg, seed=0, advisor=None)  # advisor from the config
+    advisor = make_advisor(args.advisor, cfg, cache=False)  # cold: every prompt reaches the LLM
+    stack = build_env_stack("pirl", cfg, seed=0, advisor=advisor)
     rows.append(
         run_case(f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare)
     )
