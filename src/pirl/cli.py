@@ -57,12 +57,11 @@ def _env_config(config: Path | None, **overrides: Any) -> VCPPConfig:
 
 
 def _make_policy(name: str, seed: int):
-    from pirl.agents import BoustrophedonPolicy, RandomPolicy
+    from pirl.agents.loading import load_policy
 
-    policies = {"random": lambda: RandomPolicy(seed), "boustrophedon": BoustrophedonPolicy}
-    if name not in policies:
-        raise ConfigError(f"--policy {name!r}: allowed values are {', '.join(policies)}")
-    return policies[name]()
+    if name not in ("random", "boustrophedon"):
+        raise ConfigError(f"--policy {name!r}: allowed values are random, boustrophedon")
+    return load_policy(name, seed=seed)
 
 
 def _metrics_table(rows: list[tuple[str, dict[str, float]]], title: str) -> Table:
