@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint format venv clean
+.PHONY: demo test lint format venv clean chromium
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -23,7 +23,11 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/pirl demo
 
-test: $(STAMP)
+# The report test renders report.html in headless Chromium (Debian package `chromium`).
+chromium:
+	@sh scripts/ensure-chromium.sh
+
+test: $(STAMP) chromium
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 	$(BIN)/python -m pytest

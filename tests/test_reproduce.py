@@ -58,7 +58,7 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
 
 def test_report_renders_in_headless_chromium(reproduced, tmp_path):
     _, _, report, _ = reproduced
-    assert CHROMIUM, "headless Chromium is needed (Debian package chromium; .ci/run installs it)"
+    assert CHROMIUM, "headless Chromium is needed (Debian package chromium; make test installs it)"
     dom = subprocess.run(
         [
             CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
