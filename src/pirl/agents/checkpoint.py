@@ -157,6 +157,36 @@ def load_state(path: Path) -> dict:
         return pickle.load(fh)
 
 
+def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
+    """The newest checkpoint that loads, and its state: LATEST first, then older ones.
+
+    A damaged checkpoint (a truncated ``state.pkl`` after a full disk, a copy cut short) is
+    skipped with a note through ``log``; None when no checkpoint loads.
+    """
+    first = latest(folder)
+    steps = sorted(folder.glob("step_*"), key=_step_of, reverse=True) if folder.is_dir() else []
+    candidates = ([first] if first is not None else []) + [p for p in steps if p != first]
+    for path in candidates:
+        if not ((path / "state.pkl").is_file() and (path / "model.zip").is_file()):
+            continue
+        try:
+            state = load_state(path)
+        except Exception as exc:  # noqa: BLE001 - any unreadable pickle means "damaged"
+            if log is not None:
+                log(f"resume: checkpoint {path} is damaged ({type(exc).__name__}); skipping it")
+            continue
+        if isinstance(state, dict) and "num_timesteps" in state:
+            return path, state
+    return None
+
+
+def _step_of(path: Path) -> int:
+    try:
+        return int(path.name.split("_")[1])
+    except (IndexError, ValueError):
+        return -1
+
+
 def _atomic_text(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)

@@ -20,7 +20,7 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -61,24 +61,111 @@ def train_seed_base(seed: int) -> int:
 
 
 # -- 1. run folder --------------------------------------------------------------------------
-def prepare_run_folder(out: Path, resume: bool) -> Path | None:
-    """Create ``out`` for a new run, or return the checkpoint to resume from.
+def prepare_run_folder(out: Path, resume: bool, log: Any = None) -> tuple[Path, dict] | None:
+    """Create ``out`` for a new run, or return the checkpoint to resume from and its state.
 
-    A folder that exists without ``resume`` is an error: runs are never overwritten.
+    A folder that exists without ``resume`` is an error: runs are never overwritten. A run
+    stopped before its first checkpoint resumes from step 0 (None); a damaged latest
+    checkpoint falls back to the previous complete one.
     """
     if resume:
         if not out.is_dir():
             raise ConfigError(f"--resume: run folder {out} does not exist")
-        ckpt = checkpoint.latest(out / "checkpoints")
-        if ckpt is None:
-            raise ConfigError(f"--resume: no complete checkpoint in {out / 'checkpoints'}")
-        return ckpt
+        found = checkpoint.load_latest(out / "checkpoints", log)
+        if found is None and log is not None:
+            log(f"resume: no complete checkpoint in {out / 'checkpoints'}; starting from step 0")
+        return found
     if out.exists():
         raise ConfigError(
             f"run folder {out} already exists; pass --resume to continue it or choose --out"
         )
     out.mkdir(parents=True)
     return None
+
+
+# Settings a resumed run may change: how long it runs, how often it checkpoints and logs, and
+# what `pirl reproduce` does around it. Everything else that the method uses (PARE and the
+# advisor for PIRL only) must match the run's config.yaml.
+RESUME_MAY_CHANGE = ("train.", "reproduce.")
+
+
+def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
+    """``cfg`` with the environment the method really trains on (what config.yaml records)."""
+    return replace(cfg, env=env_config_for(method, cfg))
+
+
+def check_resume(out: Path, method: str, cfg: RunConfig, seed: int, log: Any = print) -> RunConfig:
+    """Before anything is built: the run in ``out`` must be the one this command describes.
+
+    Reads the run's own ``meta.json`` and ``config.yaml``; a different method, seed or config
+    value (advisor included) is refused with a message naming both values. A larger
+    ``train.total_steps`` extends the run (said in one line). Returns the config to continue
+    with: the run's own, with this command's ``train`` settings.
+    """
+    out = Path(out)
+    if not out.is_dir():
+        raise ConfigError(f"--resume: run folder {out} does not exist")
+    meta_path, cfg_path = out / "meta.json", out / "config.yaml"
+    if not meta_path.is_file() or not cfg_path.is_file():
+        if checkpoint.latest(out / "checkpoints") is None and not (out / "model.zip").exists():
+            return cfg  # stopped before the run was recorded: nothing to continue, start it
+        raise ConfigError(f"--resume: {out} is not a run folder (no meta.json or config.yaml)")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"--resume: {meta_path} is damaged ({exc})") from None
+    stop = "; resume takes the run's own settings (leave the option out) or choose a new --out"
+    if meta.get("method") != method:
+        raise ConfigError(
+            f"--resume: {out} is a {meta.get('method')} run; this command asks for "
+            f"--method {method}{stop}"
+        )
+    if meta.get("seed") != seed:
+        raise ConfigError(
+            f"--resume: {out} was trained with seed {meta.get('seed')}; this command gives "
+            f"--seed {seed}{stop}"
+        )
+    saved = resolved_config(method, RunConfig.from_yaml(cfg_path))
+    wanted = resolved_config(method, cfg)
+    old, new = _flat(saved.to_dict()), _flat(wanted.to_dict())
+    free = RESUME_MAY_CHANGE + (("il.",) if method == "pirl" else ("il.", "pare.", "advisor."))
+    for key in sorted(old.keys() | new.keys()):
+        if key.startswith(free) or old.get(key) == new.get(key):
+            continue
+        raise ConfigError(
+            f"--resume: {out} was trained with {key}={old.get(key)!r}; this command gives "
+            f"{key}={new.get(key)!r}{stop}"
+        )
+    before, after = int(meta.get("total_steps") or 0), cfg.train.total_steps
+    if after > before:
+        log(f"resume: extending {out} from {before:,} to {after:,} steps")
+    elif after < before:
+        raise ConfigError(
+            f"--resume: {out} was set to train {before:,} steps; --steps {after:,} would cut it "
+            "short (give at least that many, or leave --steps out)"
+        )
+    return replace(saved, train=cfg.train, reproduce=cfg.reproduce)
+
+
+def _finished_steps(out: Path) -> int | None:
+    """Steps of the finished model in ``out``, or None while the run is not complete."""
+    try:
+        meta = json.loads((out / "meta.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if meta.get("complete") and (out / "model.zip").is_file():
+        return int(meta.get("timesteps") or 0)
+    return None
+
+
+def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def git_commit() -> str:
@@ -279,7 +366,10 @@ class Progress:
         self.tty = enabled and sys.stderr.isatty()
         self.start = time.perf_counter()
         self.first: int | None = None
-        self.last_log = 0.0
+        self.first_t = self.start
+        self.last_log = self.start  # the first plain line comes after every_s, with a real fps
+        self.steps = 0
+        self.info = ""
         self._bar = None
         if self.tty:
             from rich.progress import (
@@ -305,23 +395,30 @@ class Progress:
         if not self.enabled:
             return
         now = time.perf_counter()
-        if self.first is None:
-            self.first = steps
-        fps = (steps - self.first) / max(1e-9, now - self.start)
+        if self.first is None:  # steps of the first vector step (or of the resumed checkpoint)
+            self.first, self.first_t = steps, now
+        fps = (steps - self.first) / max(1e-9, now - self.first_t)
         info = f"{fps:,.0f} fps"
         if vcr is not None:
             info += f"  VCR(recent) {vcr:.2f}"
         if calls is not None:
             info += f"  advisor calls {calls:,}"
+        self.steps, self.info = steps, info
         if self._bar is not None:
             self._bar.update(self._task, completed=min(steps, self.total), info=info)
-        elif now - self.last_log >= self.every_s or steps >= self.total:
+        elif now - self.last_log >= self.every_s:  # one plain line per interval
             self.last_log = now
-            print(f"[{self.label}] {steps:,}/{self.total:,} steps  {info}", flush=True)
+            self._line()
+
+    def _line(self) -> None:
+        print(f"[{self.label}] {self.steps:,}/{self.total:,} steps  {self.info}", flush=True)
 
     def close(self) -> None:
+        """Stop the bar, or print the one final plain line."""
         if self._bar is not None:
             self._bar.stop()
+        elif self.enabled and self.first is not None:
+            self._line()
 
 
 # -- the whole run ---------------------------------------------------------------------------
@@ -340,8 +437,24 @@ def train(
     writes a checkpoint; ``resume=True`` continues from the latest one.
     """
     out = Path(out)
+    log = print if show_progress else (lambda _m: None)
     env_config_for(method, cfg)  # validates the method before touching the disk
-    ckpt = prepare_run_folder(out, resume)
+    if resume:
+        cfg = check_resume(out, method, cfg, seed, log)
+        done = _finished_steps(out)
+        if done is not None and done >= cfg.train.total_steps:
+            log(f"{out} is already complete ({done:,} steps); give a larger --steps to extend it")
+            return out / "model.zip"
+    cfg = resolved_config(method, cfg)  # config.yaml records what really trains
+    rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
+    if cfg.train.total_steps % rollout:
+        whole = -(-cfg.train.total_steps // rollout) * rollout
+        log(
+            f"note: PPO trains whole rollouts of n_envs x n_steps = {rollout:,} steps, so "
+            f"{cfg.train.total_steps:,} steps become {whole:,}"
+        )
+    found = prepare_run_folder(out, resume, log)
+    ckpt = found[0] if found is not None else None
     torch.set_num_threads(cfg.ppo.torch_threads)
     if method == "pirl" and advisor is None:
         from pirl.advice.factory import make_advisor
@@ -361,8 +474,8 @@ def train(
     stack = build_env_stack(method, cfg, seed, advisor)
     model = build_ppo(stack.env, cfg, seed, out / "tb")
     csv_rows = 0
-    if ckpt is not None:
-        state = checkpoint.load_state(ckpt)
+    if found is not None:
+        state = found[1]
         checkpoint.restore(state, model, stack.env, stack.venv, stack.pare)
         csv_rows = state.get("csv_rows", 0)
     total = cfg.train.total_steps
