@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -12,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from pirl.world.config import ConfigError, VCPPConfig
+from pirl.world.config import ConfigError, UserError, VCPPConfig
 
 app = typer.Typer(
     add_completion=False,
@@ -30,7 +31,7 @@ RayOpt = Annotated[
     str | None,
     typer.Option(
         "--ray-address",
-        help="Run on Ray (pip install 'pirl[distributed]'): HOST:PORT of a cluster's head, "
+        help="Run on Ray (pip install 'pirl\\[distributed]'): HOST:PORT of a cluster's head, "
         "auto, or local (a Ray instance on this machine). Run folders must be on storage "
         "every node shares.",
     ),
@@ -45,7 +46,8 @@ def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return fn(*args, **kwargs)
         except (ConfigError, FileNotFoundError) as exc:
-            err.print(f"[bold red]error:[/] {escape(str(exc))}")
+            # One line whatever the width: a log or a test reads it whole.
+            err.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
             raise typer.Exit(2) from None
 
     return wrapper
@@ -111,9 +113,10 @@ def reproduce(
     profile: Annotated[str, typer.Option(help="quick (the demo) or paper (full budgets).")] = (
         "quick"
     ),
-    advisor: Annotated[str, typer.Option(help="PIRL's advisor: local, openai or oracle.")] = (
-        "local"
-    ),
+    advisor: Annotated[
+        str | None,
+        typer.Option(help="PIRL's advisor: local, openai or oracle (default: the preset's)."),
+    ] = None,
     seeds: Annotated[list[int] | None, typer.Option(help="Training seeds per method.")] = None,
     workers: Annotated[int | None, typer.Option(help="Evaluation worker processes.")] = None,
     out: Annotated[Path | None, typer.Option(help="Output folder (default results/<profile>).")] = (
@@ -130,20 +133,16 @@ def reproduce(
     from pirl.agents.config import RunConfig
     from pirl.evaluate.reproduce import reproduce as run_reproduce
 
-    path = config or _preset(profile)
+    path = _preset(config, "--config") if config else _preset(profile)
     cfg = RunConfig.from_yaml(path)
     if seeds:
         cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
+    advisor = advisor or cfg.pare.advisor
+    _check_openai_key(cfg, advisor)
     out = out or Path("results") / profile
     console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
     with Progress(console=console, transient=True) as bar:
-        task = bar.add_task("evaluation episodes", total=None, visible=False)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total, visible=True)
-            if not console.is_terminal:  # a log file gets plain lines instead of a bar
-                console.print(f"evaluation: {done}/{total} episodes")
-
+        progress = _EpisodeProgress(bar, "evaluation")
         report = run_reproduce(
             cfg,
             out,
@@ -157,21 +156,40 @@ def reproduce(
     console.print(f"tables: {report.parent / 'table.md'}")
 
 
-def _preset(profile: str) -> Path:
-    here = Path("configs") / f"{profile}.yaml"
-    if here.is_file():
-        return here
-    bundled = Path(__file__).resolve().parents[2] / "configs" / f"{profile}.yaml"
-    if bundled.is_file():
-        return bundled
-    raise ConfigError(f"--profile {profile!r}: no configs/{profile}.yaml (try quick or paper)")
+BUNDLED_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def _preset(profile: str | Path, option: str = "--profile") -> Path:
+    """A preset by name (quick, paper, test) or path: a file that exists, else
+    ``configs/<name>.yaml`` here, else the bundled one (whatever the working directory)."""
+    given = Path(profile)
+    if given.is_file():
+        return given
+    name = given.name if given.suffix in (".yaml", ".yml") else f"{given.name}.yaml"
+    for candidate in (Path("configs") / name, BUNDLED_CONFIGS / name):
+        if candidate.is_file() and (given.parent in (Path("."), Path("configs"))):
+            return candidate
+    known = ", ".join(sorted(p.stem for p in BUNDLED_CONFIGS.glob("*.yaml"))) or "quick, paper"
+    raise ConfigError(f"{option} {str(profile)!r}: no such file or bundled preset (try {known})")
+
+
+def _check_openai_key(cfg: Any, advisor: str) -> None:
+    """The openai advisor without its key: one line before anything is built or written."""
+    import os
+
+    a = cfg.advisor
+    if advisor == "openai" and not a.openai_base_url and not os.environ.get(a.openai_api_key_env):
+        raise UserError(
+            f"the openai advisor needs an API key: set the {a.openai_api_key_env} environment "
+            "variable (or advisor.openai_base_url for a server that needs none)"
+        )
 
 
 @app.command()
 @_clean_errors
 def demo(
     out: Annotated[Path, typer.Option(help="Output folder.")] = Path("results/quick"),
-    advisor: Annotated[str, typer.Option(help="PIRL's advisor.")] = "local",
+    advisor: Annotated[str | None, typer.Option(help="PIRL's advisor (default: quick's).")] = None,
 ) -> None:
     """The main job on the embedded defaults: ``pirl reproduce --profile quick``."""
     reproduce(profile="quick", advisor=advisor, seeds=None, workers=None, out=out, config=None)
@@ -182,11 +200,19 @@ def demo(
 def train(
     method: Annotated[str, typer.Option(help="pirl, ppo-sr, ppo-ewri or il.")],
     out: Annotated[Path, typer.Option(help="Run folder to create (or resume).")],
-    config: Annotated[Path, typer.Option(help="Preset YAML, e.g. configs/quick.yaml.")] = Path(
-        "configs/quick.yaml"
-    ),
-    steps: Annotated[int | None, typer.Option(help="Override train.total_steps.")] = None,
-    seed: Annotated[int, typer.Option(help="Training seed.")] = 0,
+    config: Annotated[
+        str | None,
+        typer.Option(
+            help="Preset name (quick, paper, test) or YAML file; default quick, or with "
+            "--resume the run's own config.yaml."
+        ),
+    ] = None,
+    steps: Annotated[
+        int | None, typer.Option(help="Override train.total_steps (--resume: extend).")
+    ] = None,
+    seed: Annotated[
+        int | None, typer.Option(help="Training seed (default 0, or the resumed run's).")
+    ] = None,
     advisor: Annotated[
         str | None, typer.Option(help="pirl: local, openai or oracle (default: the config's).")
     ] = None,
@@ -198,11 +224,19 @@ def train(
     from pirl.agents.train import TrainingInterrupted
     from pirl.agents.train import train as run_training
 
-    cfg = RunConfig.from_yaml(config)
+    own = out / "config.yaml"
+    if resume and config is None and own.is_file():
+        cfg = RunConfig.from_yaml(own)  # resume continues the run that is in the folder
+    else:
+        cfg = RunConfig.from_yaml(_preset(config or "quick", "--config"))
+    if seed is None:
+        seed = _run_seed(out) if resume else 0
     if steps is not None:
         cfg = cfg.with_overrides(train={"total_steps": steps})
     if advisor is not None:
         cfg = cfg.with_overrides(pare={"advisor": advisor})
+    if method == "pirl":
+        _check_openai_key(cfg, cfg.pare.advisor)
     try:
         if method == "il":
             from pirl.agents.imitation import train_il
@@ -216,6 +250,16 @@ def train(
         err.print(f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume")
         raise typer.Exit(130) from None
     console.print(f"done: {result}")
+
+
+def _run_seed(out: Path) -> int:
+    """The seed a run folder was trained with (0 when it records none)."""
+    import json
+
+    try:
+        return int(json.loads((out / "meta.json").read_text()).get("seed") or 0)
+    except (OSError, ValueError):
+        return 0
 
 
 @app.command()
@@ -252,13 +296,21 @@ def evaluate(
         raise ConfigError(f"--episodes {episodes}: must be >= 1")
     run_list = _split_paths(runs or [])
     if config is not None:
-        cfg = RunConfig.from_yaml(config)
+        cfg = RunConfig.from_yaml(_preset(config, "--config"))
     elif run_list and (run_list[0] / "config.yaml").is_file():
         cfg = RunConfig.from_yaml(run_list[0] / "config.yaml")
+        # A run records the reward it trained with; the scenarios do not depend on it.
+        cfg = replace(cfg, env=cfg.env.replace(reward="static", llm_weight=False))
     else:
         cfg = RunConfig()
+    for r in run_list:
+        if not r.is_dir():
+            raise ConfigError(f"--runs {r}: no such run folder")
     specs = [spec_for_run(r) for r in run_list]
-    specs += [spec_for_builtin(m, advisor) for m in _split_words(methods or [])]
+    builtins = _split_words(methods or [])
+    if "llm-only" in builtins:
+        _check_openai_key(cfg, advisor)
+    specs += [spec_for_builtin(m, advisor) for m in builtins]
     plan = EvalPlan(
         specs=specs,
         sizes=[parse_size(s) for s in _split_words(sizes or ["30", "45", "60"])],
@@ -273,16 +325,38 @@ def evaluate(
 
         factory = functools.partial(ray_executor, ray_address)
     with Progress(console=console, transient=True) as bar:
-        task = bar.add_task("episodes", total=None)
         summary = run_evaluation(
-            plan,
-            out,
-            workers,
-            progress=lambda d, t: bar.update(task, completed=d, total=t),
-            executor_factory=factory,
+            plan, out, workers, progress=_EpisodeProgress(bar, "episodes"), executor_factory=factory
         )
     console.print(_summary_table(summary))
     console.print(f"wrote {out / 'episodes.jsonl'} and {summary}")
+
+
+def _mean_ci(mean: float, half: float) -> str:
+    """``mean ± half``, or the mean alone when there is no interval (n = 1)."""
+    import math
+
+    return f"{mean:.3f}" if math.isnan(half) else f"{mean:.3f} ± {half:.3f}"
+
+
+class _EpisodeProgress:
+    """Evaluation progress: a bar on a terminal; off one, a plain line every ``every_s``
+    seconds and a final one."""
+
+    def __init__(self, bar: Any, label: str, every_s: float = 10.0) -> None:
+        import time
+
+        self.bar, self.label, self.every_s = bar, label, every_s
+        self.task = bar.add_task(label, total=None, visible=False)
+        self.clock = time.perf_counter
+        self.last = self.clock()
+
+    def __call__(self, done: int, total: int) -> None:
+        self.bar.update(self.task, completed=done, total=total, visible=True)
+        now = self.clock()
+        if not console.is_terminal and (done >= total or now - self.last >= self.every_s):
+            self.last = now
+            console.print(f"{self.label}: {done}/{total} episodes", highlight=False)
 
 
 def _split_words(values: list[str]) -> list[str]:
@@ -300,7 +374,7 @@ def _summary_table(path: Path) -> Table:
     for col in ("method", "sim", "size", "n", "VCR", "BE", "RVC"):
         table.add_column(col)
     for row in read_summary(path):
-        cells = [f"{row[m + '_mean']:.3f} ± {row[m + '_ci95']:.3f}" for m in ("vcr", "be", "rvc")]
+        cells = [_mean_ci(row[m + "_mean"], row[m + "_ci95"]) for m in ("vcr", "be", "rvc")]
         table.add_row(row["label"], row["sim"], row["size"], str(int(row["n"])), *cells)
     return table
 
@@ -328,7 +402,9 @@ def advise(
     from pirl.pare.state import prompt_state
     from pirl.world.planning import WorldView
 
-    cfg = RunConfig.from_yaml(config) if config else RunConfig()
+    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    if base_url is None:
+        _check_openai_key(cfg, advisor)
     changes: dict[str, Any] = {}
     if model is not None:
         changes["openai_model" if advisor == "openai" else "local_model"] = model
@@ -359,8 +435,26 @@ def advise(
     if answer.error:
         console.print(f"[bold red]error:[/] {answer.error}")
     backend.close()
-    if rec is None:
+    copied = _copies_format_example(rec, prompt)
+    if copied:
+        console.print(
+            "[bold yellow]warning:[/] the answer is the prompt's own format example, not advice "
+            f"for this state (prompt variant {cfg.pare.prompt_variant!r}). The embedded model "
+            "suits the compact prompt: pare.prompt_variant: compact (as in configs/quick.yaml, "
+            "e.g. --config quick)."
+        )
+    if rec is None or copied:
         raise typer.Exit(1)
+
+
+def _copies_format_example(rec: Any, prompt: str) -> bool:
+    """Whether the parsed answer is exactly the format example the prompt shows."""
+    from pirl.advice.parser import parse_recommendation
+    from pirl.advice.recommendation import FORMAT_EXAMPLE
+
+    return (
+        rec is not None and FORMAT_EXAMPLE in prompt and rec == parse_recommendation(FORMAT_EXAMPLE)
+    )
 
 
 MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")

@@ -18,7 +18,7 @@ from pirl.env.observation import _observation, build_observations, obs_size
 from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
 from pirl.world.config import REWARD_TERMS, VCPPConfig
-from pirl.world.dynamics import PI_STEP_LIMIT, _step_one
+from pirl.world.dynamics import PI_STEP_LIMIT, step_one
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch
 
@@ -27,7 +27,7 @@ def _make_step_kernel(parallel: bool):
     """A kernel that steps every world, weighs its reward terms and builds its observation.
 
     One fused loop (one thread launch, data still in cache) over the rules defined once in
-    :func:`pirl.world.dynamics._step_one` and :func:`pirl.env.observation._observation`.
+    :func:`pirl.world.dynamics.step_one` and :func:`pirl.env.observation._observation`.
     """
     loop = numba.prange if parallel else range
 
@@ -38,7 +38,7 @@ def _make_step_kernel(parallel: bool):
         window, obs,
     ):  # fmt: skip
         for e in loop(actions.shape[0]):
-            _step_one(
+            step_one(
                 e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits,
                 blk_todo, bx, by, obstacles, pf, pi, buf, terms, flags,
             )  # fmt: skip

@@ -3,9 +3,13 @@
 A :class:`Mission` turns the policy's grid actions into waypoints for a flying drone and turns
 the drone's flight back into the grid's bookkeeping, so that PyFlyt and Webots run the same
 rules and only differ in how they fly. It keeps a :class:`~pirl.world.state.WorldBatch` of one
-world as its grid-level state: the policy's observation comes from the grid's own builder
-(:func:`pirl.env.observation.build_observations`) and its metrics from
-:func:`pirl.world.metrics.episode_metrics`, so nothing here re-implements either.
+world as its grid-level state and applies the grid's own rules to it: the camera
+(:func:`pirl.world.dynamics.camera_action`), the booking of a view
+(:func:`~pirl.world.dynamics.book_view`), the visit count and the close of a step (battery,
+counters, reward terms, termination: :func:`~pirl.world.dynamics.close_step`), the
+observation (:func:`pirl.env.observation.build_observations`) and the metrics
+(:func:`pirl.world.metrics.episode_metrics`). Only the flight and the mapping from a
+continuous pose to cells and footprints are its own.
 
 One step, as a backend drives it::
 
@@ -34,7 +38,6 @@ Rules (DESIGN.md sections 3 and 10; docs/physics.md):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,7 +52,6 @@ from pirl.world import dynamics as D
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows
 from pirl.world.metrics import episode_metrics
-from pirl.world.planning import MOVE_DELTAS
 from pirl.world.state import Scenario, WorldBatch, draw_scenario
 
 Cell = tuple[int, int, int]
@@ -217,27 +219,14 @@ class Mission:
         tilt, pan, zoom = int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
         self._camera_before = (tilt, pan, zoom)
         kind, target = CAMERA, origin
-        if action < 6:
-            d = MOVE_DELTAS[action]
+        if action < D.N_MOVES:
+            d = D.MOVE_DELTAS[action]
             cand = (origin[0] + d[0], origin[1] + d[1], origin[2] + d[2])
             inside = all(0 <= c < s for c, s in zip(cand, self.cfg.size, strict=True))
             kind, target = (MOVE, cand) if inside else (REFUSED, origin)
         else:
-            # The grid's camera rules: steps of 5 degrees, 15 degrees, 0.1; limits hold.
-            if action == 6:
-                tilt = min(90, tilt + 5)
-            elif action == 7:
-                tilt = max(0, tilt - 5)
-            elif action == 8:
-                pan = min(90, pan + 15)
-            elif action == 9:
-                pan = max(-90, pan - 15)
-            elif action == 10:
-                zoom = min(20, zoom + 1)
-            else:
-                zoom = max(5, zoom - 1)
-            row[D.TILT], row[D.PAN], row[D.ZOOM] = tilt, pan, zoom
-            row[D.CAM_ACTIONS] += 1
+            D.camera_action(0, action, self.world.ints)  # the grid's camera rule, limits included
+            tilt, pan, zoom = int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
         self.plan = StepPlan(action, kind, origin, target, (tilt, pan, zoom))
         self._target_blocked = bool(self.world.blocked[0][target])
         self._bounced = False
@@ -345,42 +334,23 @@ class Mission:
         used = self.physics.energy_per_hover_s * self._power_s
         if plan.kind == CAMERA:
             used += self._camera_energy
-        w.energy[0] -= used
         self.energy_used += used
-        curiosity = 0.0
-        if moved:
-            w.visits[0, cell[0], cell[1], cell[2]] += 1
-            curiosity = 1.0 / math.sqrt(w.visits[0, cell[0], cell[1], cell[2]])
+        curiosity = D.visit(0, w.ints, w.visits) if moved else 0.0
         intended = self.nearest_cell(self._target_m)
         off_target = cell != intended and not self._collided
-        if off_target:
-            row[D.WIND_PUSHES] += 1
         self._track_sum += float(np.linalg.norm(np.asarray(pose.position) - self._target_m))
         self._steps_done += 1
         self.timeouts += int(self._timed_out)
         self.sim_seconds += self._t
 
-        collision = self._collided
-        redundant = new == 0
-        idle = not moved and not cam_changed and not collision
-        row[D.STEPS] += 1
-        row[D.COLLISIONS] += int(collision)
-        row[D.RED_STEPS] += int(redundant)
-        terms = w.terms[0]
-        terms[:] = 0.0
-        terms[D.T_COVERAGE] = new / w.max_footprint
-        terms[D.T_REDUNDANT] = float(redundant)
-        terms[D.T_BATTERY] = used / self.cfg.energy_move
-        terms[D.T_CAM] = float(cam_changed and new > 0)
-        terms[D.T_CURIOSITY] = curiosity
-        terms[D.T_COLLISION] = float(collision)
-        terms[D.T_IDLE] = float(idle)
-        terminated = bool(w.energy[0] <= 0.0 or row[D.COVERED] >= row[D.COVERABLE])
-        truncated = (not terminated) and int(row[D.STEPS]) >= w.step_limit
+        # The grid's own close of a step: battery, counters, reward terms, episode end. An
+        # arrival off the intended cell counts where the grid counts a wind push.
+        D.close_step(
+            0, w.ints, w.energy, w.pf, w.pi, w.terms, w.flags, used, new, moved, cam_changed,
+            self._collided, off_target, curiosity,
+        )  # fmt: skip
         flags = w.flags[0]
-        flags[D.F_COLLISION], flags[D.F_REDUNDANT], flags[D.F_IDLE] = collision, redundant, idle
-        flags[D.F_TERMINATED], flags[D.F_TRUNCATED] = terminated, truncated
-        flags[D.F_WIND], flags[D.F_NEW] = off_target, new
+        terminated, truncated = bool(flags[D.F_TERMINATED]), bool(flags[D.F_TRUNCATED])
         self.done = terminated or truncated
         self.plan = None
         return self._observation(), terminated, truncated, self._info()
@@ -405,30 +375,18 @@ class Mission:
 
     # -- internals ------------------------------------------------------------------------
     def _book_view(self) -> int:
-        """Book this step's view (the union of its samples) like the grid books one view.
-
-        Mirrors :func:`pirl.world.dynamics.observe`: new cells, views, cells seen twice, the
-        coarse map's counters and, when nothing was new, the redundantly viewed cells.
-        """
+        """Book this step's view (the union of its samples) with the grid's own booking rule
+        (:func:`pirl.world.dynamics.book_view`); the footprint sum takes the arrival view's
+        size, the analogue of the grid's one view per step."""
         w = self.world
-        row = w.ints[0]
-        seen = self._seen & w.coverable[0]
-        views = w.views[0]
-        fresh = seen & (views == 0)
-        new = int(fresh.sum())
-        row[D.MULTI_CELLS] += int((seen & (views == 1)).sum())
-        views[seen] += 1
-        ii, jj = np.nonzero(fresh)
-        np.subtract.at(w.blk_todo[0], (w.bx[ii], w.by[jj]), 1)
-        row[D.COVERED] += new
-        row[D.VIEWS] += int(seen.sum())
-        # Footprint size of the arrival view: the analogue of the grid's one view per step.
-        row[D.FOOT_SUM] += self._last_fp
-        if new == 0:
-            red = seen & ~w.redmask[0]
-            w.redmask[0] |= seen
-            row[D.RED_CELLS] += int(red.sum())
-        return new
+        cells = np.ascontiguousarray(np.argwhere(self._seen))
+        w.ints[0, D.FOOT_SUM] += self._last_fp
+        return int(
+            D.book_view(
+                0, cells, len(cells), w.ints, w.coverable, w.views, w.redmask, w.blk_todo, w.bx,
+                w.by, True,
+            )
+        )  # fmt: skip
 
     def _observation(self) -> np.ndarray:
         w = self.world

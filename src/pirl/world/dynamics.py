@@ -33,15 +33,21 @@ N_PF = 9
 PI_MODEL, PI_OCCLUSION, PI_X, PI_Y, PI_Z, PI_STEP_LIMIT = range(6)
 N_PI = 6
 
-# Action deltas in the paper's order: x+, x-, y+, y-, z+, z-, tilt+5, tilt-5, pan+15, pan-15,
-# zoom+0.1, zoom-0.1.
+# Actions in the paper's order; the names say what each one does.
+X_PLUS, X_MINUS, Y_PLUS, Y_MINUS, Z_PLUS, Z_MINUS = 0, 1, 2, 3, 4, 5
+TILT_PLUS, TILT_MINUS, PAN_PLUS, PAN_MINUS, ZOOM_PLUS, ZOOM_MINUS = 6, 7, 8, 9, 10, 11
+N_MOVES = 6  # actions below N_MOVES move the UAV, the others steer the camera
 N_ACTIONS = 12
 ACTION_NAMES = (
     "x+", "x-", "y+", "y-", "z+", "z-", "tilt+5", "tilt-5", "pan+15", "pan-15", "zoom+0.1",
     "zoom-0.1",
 )  # fmt: skip
+# The one table of move deltas (x, y, z) of actions 0-5; planners read it as MOVE_DELTAS.
 MOVES = np.array(
     [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64
+)
+MOVE_DELTAS: tuple[tuple[int, int, int], ...] = tuple(
+    (int(dx), int(dy), int(dz)) for dx, dy, dz in MOVES
 )
 WIND_DIRS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=np.int64)
 
@@ -64,23 +70,18 @@ def _free(blocked, e, x, y, z, sx, sy, sz):
 
 
 @numba.njit(cache=True)
-def observe(
-    e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf, mark_redundant
-):
-    """Look from world e's current pose; update coverage bookkeeping; return new cells.
+def book_view(e, cells, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant):
+    """Book one view of world e (the first ``n`` distinct rows (i, j) of ``cells``).
 
-    With ``mark_redundant``, a view that adds nothing marks its cells as redundantly viewed
-    (the set C_redundant of the RVC metric).
+    Counts new cells, views and cells seen twice, keeps the coarse map's per-block counts and,
+    with ``mark_redundant``, marks the cells of a view that adds nothing as redundantly viewed
+    (the set C_redundant of the RVC metric). Returns the number of new cells. The grid books
+    its footprint here; the physics evaluation books the union of a flight's views here too.
     """
-    n = footprint_cells(
-        pi[PI_MODEL], ints[e, PX], ints[e, PY], ints[e, PZ], ints[e, TILT], ints[e, PAN],
-        ints[e, ZOOM], pi[PI_X], pi[PI_Y], pf[PF_FOV], pf[PF_RANGE], pi[PI_OCCLUSION] != 0,
-        obstacles[e], ints[e, N_OBS], buf,
-    )  # fmt: skip
     new = 0
     seen = 0
     for k in range(n):
-        i, j = buf[k, 0], buf[k, 1]
+        i, j = cells[k, 0], cells[k, 1]
         if not coverable[e, i, j]:
             continue
         seen += 1
@@ -93,10 +94,9 @@ def observe(
         views[e, i, j] = v + 1
     ints[e, COVERED] += new
     ints[e, VIEWS] += seen
-    ints[e, FOOT_SUM] += n
     if new == 0 and mark_redundant:
         for k in range(n):
-            i, j = buf[k, 0], buf[k, 1]
+            i, j = cells[k, 0], cells[k, 1]
             if coverable[e, i, j] and not redmask[e, i, j]:
                 redmask[e, i, j] = True
                 ints[e, RED_CELLS] += 1
@@ -104,73 +104,66 @@ def observe(
 
 
 @numba.njit(cache=True)
-def _step_one(
-    e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
-    obstacles, pf, pi, buf, terms, flags,
-):  # fmt: skip
-    """Apply world e's action; fill its ``terms`` (raw reward terms) and ``flags``."""
-    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
-    a = actions[e]
-    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
-    tilt, pan, zoom = ints[e, TILT], ints[e, PAN], ints[e, ZOOM]
-    collision = False
-    if a < 6:
-        nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
-        if _free(blocked, e, nx, ny, nz, sx, sy, sz):
-            ints[e, PX], ints[e, PY], ints[e, PZ] = nx, ny, nz
-        else:
-            collision = True
-        if a < 4:
-            used = pf[PF_E_MOVE]
-        elif a == 4:
-            used = pf[PF_E_CLIMB]
-        else:
-            used = pf[PF_E_DESCEND]
+def observe(
+    e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf, mark_redundant
+):
+    """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
+    n = footprint_cells(
+        pi[PI_MODEL], ints[e, PX], ints[e, PY], ints[e, PZ], ints[e, TILT], ints[e, PAN],
+        ints[e, ZOOM], pi[PI_X], pi[PI_Y], pf[PF_FOV], pf[PF_RANGE], pi[PI_OCCLUSION] != 0,
+        obstacles[e], ints[e, N_OBS], buf,
+    )  # fmt: skip
+    ints[e, FOOT_SUM] += n
+    return book_view(e, buf, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant)
+
+
+@numba.njit(cache=True)
+def camera_action(e, a, ints):
+    """Apply camera action ``a`` (6-11) to world e: steps of 5 degrees, 15 degrees and 0.1
+    zoom; at a limit the setting holds. Counts the camera action."""
+    ints[e, CAM_ACTIONS] += 1
+    if a == TILT_PLUS:
+        ints[e, TILT] = min(90, ints[e, TILT] + 5)
+    elif a == TILT_MINUS:
+        ints[e, TILT] = max(0, ints[e, TILT] - 5)
+    elif a == PAN_PLUS:
+        ints[e, PAN] = min(90, ints[e, PAN] + 15)
+    elif a == PAN_MINUS:
+        ints[e, PAN] = max(-90, ints[e, PAN] - 15)
+    elif a == ZOOM_PLUS:
+        ints[e, ZOOM] = min(20, ints[e, ZOOM] + 1)
     else:
-        used = pf[PF_E_CAM]
-        ints[e, CAM_ACTIONS] += 1
-        if a == 6:
-            ints[e, TILT] = min(90, tilt + 5)
-        elif a == 7:
-            ints[e, TILT] = max(0, tilt - 5)
-        elif a == 8:
-            ints[e, PAN] = min(90, pan + 15)
-        elif a == 9:
-            ints[e, PAN] = max(-90, pan - 15)
-        elif a == 10:
-            ints[e, ZOOM] = min(20, zoom + 1)
-        else:
-            ints[e, ZOOM] = max(5, zoom - 1)
-    used += pf[PF_E_HOVER]
+        ints[e, ZOOM] = max(5, ints[e, ZOOM] - 1)
 
-    wind = False
-    if pf[PF_WIND] > 0.0 and _next_uniform(rng, e) < pf[PF_WIND]:
-        d = min(3, int(_next_uniform(rng, e) * 4.0))
-        wx, wy = ints[e, PX] + WIND_DIRS[d, 0], ints[e, PY] + WIND_DIRS[d, 1]
-        if _free(blocked, e, wx, wy, ints[e, PZ], sx, sy, sz):
-            ints[e, PX], ints[e, PY] = wx, wy
-            wind = True
-            ints[e, WIND_PUSHES] += 1
 
-    moved = ints[e, PX] != x or ints[e, PY] != y or ints[e, PZ] != z
-    cam_changed = ints[e, TILT] != tilt or ints[e, PAN] != pan or ints[e, ZOOM] != zoom
-    new = observe(
-        e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf[e], True
-    )
-    curiosity = 0.0
-    if moved:
-        cx, cy, cz = ints[e, PX], ints[e, PY], ints[e, PZ]
-        visits[e, cx, cy, cz] += 1
-        curiosity = 1.0 / np.sqrt(visits[e, cx, cy, cz])
+@numba.njit(cache=True)
+def visit(e, ints, visits):
+    """Count a visit to world e's current cell; return its curiosity term 1/sqrt(visits)."""
+    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
+    visits[e, x, y, z] += 1
+    return 1.0 / np.sqrt(visits[e, x, y, z])
+
+
+@numba.njit(cache=True)
+def close_step(
+    e, ints, energy, pf, pi, terms, flags, used, new, moved, cam_changed, collision, wind,
+    curiosity,
+):  # fmt: skip
+    """Book the end of world e's step: battery, counters, raw reward terms, episode end.
+
+    ``used`` is the energy the step spent, ``new`` the cells its view added; ``wind`` whether
+    something other than the action moved the UAV. Fills ``terms[e]`` and ``flags[e]``.
+    """
     redundant = new == 0
     idle = not moved and not cam_changed and not collision
-
     energy[e] -= used
     ints[e, STEPS] += 1
     if collision:
         ints[e, COLLISIONS] += 1
     if redundant:
         ints[e, RED_STEPS] += 1
+    if wind:
+        ints[e, WIND_PUSHES] += 1
 
     terms[e, T_COVERAGE] = new / pf[PF_MAX_FP]
     terms[e, T_REDUNDANT] = 1.0 if redundant else 0.0
@@ -192,26 +185,53 @@ def _step_one(
 
 
 @numba.njit(cache=True)
-def step_worlds(
-    actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
+def step_one(
+    e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
     obstacles, pf, pi, buf, terms, flags,
 ):  # fmt: skip
-    """Apply one action to every world, one after the other."""
-    for e in range(actions.shape[0]):
-        _step_one(
-            e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
-            bx, by, obstacles, pf, pi, buf, terms, flags,
-        )  # fmt: skip
+    """Apply world e's action; fill its ``terms`` (raw reward terms) and ``flags``.
 
+    Flight (a move to a free cell, else a collision) and the wind gust are the grid's own; the
+    camera, the view, the visit and the step's close are the rules above, which the physics
+    evaluation shares.
+    """
+    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
+    a = actions[e]
+    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
+    tilt, pan, zoom = ints[e, TILT], ints[e, PAN], ints[e, ZOOM]
+    collision = False
+    if a < N_MOVES:
+        nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
+        if _free(blocked, e, nx, ny, nz, sx, sy, sz):
+            ints[e, PX], ints[e, PY], ints[e, PZ] = nx, ny, nz
+        else:
+            collision = True
+        if a < Z_PLUS:
+            used = pf[PF_E_MOVE]
+        elif a == Z_PLUS:
+            used = pf[PF_E_CLIMB]
+        else:
+            used = pf[PF_E_DESCEND]
+    else:
+        used = pf[PF_E_CAM]
+        camera_action(e, a, ints)
+    used += pf[PF_E_HOVER]
 
-@numba.njit(cache=True, parallel=True)
-def step_worlds_parallel(
-    actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
-    obstacles, pf, pi, buf, terms, flags,
-):  # fmt: skip
-    """Apply one action to every world, worlds spread over threads (same results)."""
-    for e in numba.prange(actions.shape[0]):
-        _step_one(
-            e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
-            bx, by, obstacles, pf, pi, buf, terms, flags,
-        )  # fmt: skip
+    wind = False
+    if pf[PF_WIND] > 0.0 and _next_uniform(rng, e) < pf[PF_WIND]:
+        d = min(3, int(_next_uniform(rng, e) * 4.0))
+        wx, wy = ints[e, PX] + WIND_DIRS[d, 0], ints[e, PY] + WIND_DIRS[d, 1]
+        if _free(blocked, e, wx, wy, ints[e, PZ], sx, sy, sz):
+            ints[e, PX], ints[e, PY] = wx, wy
+            wind = True
+
+    moved = ints[e, PX] != x or ints[e, PY] != y or ints[e, PZ] != z
+    cam_changed = ints[e, TILT] != tilt or ints[e, PAN] != pan or ints[e, ZOOM] != zoom
+    new = observe(
+        e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf[e], True
+    )
+    curiosity = visit(e, ints, visits) if moved else 0.0
+    close_step(
+        e, ints, energy, pf, pi, terms, flags, used, new, moved, cam_changed, collision, wind,
+        curiosity,
+    )  # fmt: skip

@@ -24,10 +24,8 @@ from pirl.world.state import WorldBatch
 Cell = tuple[int, int, int]
 Camera = tuple[int, int, int]  # tilt degrees, pan degrees, zoom tenths
 
-# Move deltas in action order (actions 0-5).
-MOVE_DELTAS: tuple[Cell, ...] = (
-    (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1),
-)  # fmt: skip
+# Move deltas in action order (actions 0-5): the rules' own table.
+MOVE_DELTAS: tuple[Cell, ...] = D.MOVE_DELTAS
 
 
 @dataclass

@@ -1,7 +1,8 @@
-"""A batch of grid worlds: the state arrays, scenario generation (reset) and stepping.
+"""A batch of grid worlds: the state arrays and scenario generation (reset).
 
-:class:`WorldBatch` owns the numpy arrays of N worlds of one size and applies the compiled
-rules of :mod:`pirl.world.dynamics` to all of them at once. Scenario generation (obstacles,
+:class:`WorldBatch` owns the numpy arrays of N worlds of one size; the compiled rules of
+:mod:`pirl.world.dynamics` read and write them (stepped by :class:`pirl.env.core.EnvCore`,
+whose one fused kernel also weighs rewards and builds observations). Scenario generation (obstacles,
 start cell, wind stream) draws from a ``numpy.random.Generator`` per world, so a world reset
 with seed s is the same whether it lives alone or in a batch.
 """
@@ -94,7 +95,7 @@ def _reset_bookkeeping(e, ints, views, redmask, visits, blk_todo, blk_total, cov
 
 
 class WorldBatch:
-    """N grid worlds of one configuration, stepped together.
+    """N grid worlds of one configuration (their state; :class:`pirl.env.core.EnvCore` steps them).
 
     ``parallel`` spreads the worlds over numba threads; the results are the same either way.
     It is off by default: on a small shared machine (2 cores, with training and an LLM busy) a
@@ -103,8 +104,8 @@ class WorldBatch:
     Public arrays (first axis = world): ``ints`` (see the column constants in
     :mod:`pirl.world.dynamics`), ``energy`` (units left), ``blocked`` (X, Y, Z), ``coverable``
     and ``views`` (X, Y; views = how many steps saw the cell), ``redmask`` (cells seen by a
-    redundant step), ``visits`` (X, Y, Z), ``obstacles`` (max_obstacles, 4). After
-    :meth:`step`: ``terms`` (raw reward terms) and ``flags`` (per-step events).
+    redundant step), ``visits`` (X, Y, Z), ``obstacles`` (max_obstacles, 4). After a step:
+    ``terms`` (raw reward terms) and ``flags`` (per-step events).
     """
 
     def __init__(self, cfg: VCPPConfig, num: int, parallel: bool | None = None) -> None:
@@ -193,16 +194,6 @@ class WorldBatch:
         )  # fmt: skip
         self.terms[e] = 0.0
         self.flags[e] = 0
-
-    # -- step -----------------------------------------------------------------------------
-    def step(self, actions: np.ndarray) -> None:
-        """Apply one action per world; results land in ``terms`` and ``flags``."""
-        kernel = D.step_worlds_parallel if self.parallel else D.step_worlds
-        kernel(
-            actions, self.ints, self.energy, self.rng, self.blocked, self.coverable, self.views,
-            self.redmask, self.visits, self.blk_todo, self.bx, self.by, self.obstacles, self.pf,
-            self.pi, self.buf, self.terms, self.flags,
-        )  # fmt: skip
 
     # -- queries --------------------------------------------------------------------------
     def footprint(
