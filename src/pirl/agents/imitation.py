@@ -9,10 +9,10 @@ accuracy is written to ``il_stats.json``.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -21,21 +21,34 @@ import yaml
 from pirl.agents.config import RunConfig
 from pirl.agents.train import git_commit, prepare_run_folder, train_seed_base, write_json
 from pirl.env.vec_env import make_vec_env
-from pirl.world.config import ConfigError
+from pirl.world.config import UserError
 
 TABNET_FILE = "tabnet.zip"
 
 
-def collect_expert(
-    expert_run: Path, cfg: RunConfig, transitions: int, seed: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """(observations, actions) of the expert acting deterministically on the training world."""
-    from stable_baselines3 import PPO
+def load_expert(expert_run: Path) -> Any:
+    """The expert's PPO model, checked before an IL run folder is made: the run must exist,
+    be a finished PPO run and hold a model that loads."""
+    from pirl.agents.loading import PPOPolicy, model_file, run_meta
 
-    model_path = Path(expert_run) / "model.zip"
-    if not model_path.is_file():
-        raise ConfigError(f"expert run {expert_run} has no model.zip (is it finished?)")
-    model = PPO.load(model_path, device="cpu")
+    expert_run = Path(expert_run)
+    if not expert_run.is_dir():
+        raise UserError(f"--expert {expert_run}: no such run folder")
+    method = run_meta(expert_run)["method"]
+    if method not in ("ppo-ewri", "ppo-sr", "pirl"):
+        raise UserError(
+            f"--expert {expert_run} is a {method} run, not a finished PPO run "
+            "(ppo-ewri, ppo-sr or pirl)"
+        )
+    return PPOPolicy(model_file(expert_run), method).model
+
+
+def collect_expert(
+    expert_run: Path | Any, cfg: RunConfig, transitions: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(observations, actions) of the expert (a run folder or its loaded model) acting
+    deterministically on the training world."""
+    model = load_expert(expert_run) if isinstance(expert_run, str | Path) else expert_run
     venv = make_vec_env(
         cfg.ppo.n_envs, seed=train_seed_base(seed) + 500, config=cfg.env.replace(reward="ewri")
     )
@@ -56,9 +69,7 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     out, expert = Path(out), Path(expert)
     if resume and (out / TABNET_FILE).is_file():
         return out / TABNET_FILE
-    expert_meta = _read_meta(expert)
-    if expert_meta.get("method") not in ("ppo-ewri", "ppo-sr", "pirl"):
-        raise ConfigError(f"expert {expert} is not a finished PPO run")
+    expert_model = load_expert(expert)  # before the run folder exists
     if resume:
         out.mkdir(parents=True, exist_ok=True)
     else:
@@ -66,7 +77,7 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     torch.set_num_threads(cfg.ppo.torch_threads)
     (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     il = cfg.il
-    x, y = collect_expert(expert, cfg, il.expert_steps, seed)
+    x, y = collect_expert(expert_model, cfg, il.expert_steps, seed)
     order = np.random.default_rng(seed).permutation(len(x))
     n_valid = max(1, int(len(x) * il.valid_fraction))
     valid, fit = order[:n_valid], order[n_valid:]
@@ -113,10 +124,3 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
         },
     )
     return out / TABNET_FILE
-
-
-def _read_meta(run: Path) -> dict:
-    path = Path(run) / "meta.json"
-    if not path.is_file():
-        raise ConfigError(f"{run} is not a run folder (no meta.json)")
-    return json.loads(path.read_text())

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pirl.agents.policy import Policy, RandomPolicy
-from pirl.world.config import ConfigError
+from pirl.world.config import ConfigError, UserError
 
 BUILTIN = ("boustrophedon", "random", "llm-only")
 LABELS = {
@@ -29,7 +30,10 @@ class PPOPolicy(Policy):
     def __init__(self, model_path: Path, name: str, device: str = "cpu") -> None:
         from stable_baselines3 import PPO
 
-        self.model = PPO.load(model_path, device=device)
+        try:
+            self.model = PPO.load(model_path, device=device)
+        except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
+            raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
         self.name = name
         self.label = LABELS.get(name, name)
 
@@ -48,21 +52,58 @@ class TabNetPolicy(Policy):
         from pytorch_tabnet.tab_model import TabNetClassifier
 
         self.model = TabNetClassifier(device_name="cpu")
-        self.model.load_model(str(model_path))
+        try:
+            self.model.load_model(str(model_path))
+        except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
+            raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         return int(self.model.predict(np.asarray(obs, dtype=np.float32)[None])[0])
 
 
-def run_method(run: Path) -> str:
-    """The method a finished run folder holds (from its meta.json)."""
+_RETRAIN = "train the run again into a new --out (or restore the file from a copy)"
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0][:160] if text else type(exc).__name__
+
+
+def run_meta(run: Path) -> dict[str, Any]:
+    """The meta.json of a finished run folder."""
     meta_path = Path(run) / "meta.json"
     if not meta_path.is_file():
         raise ConfigError(f"{run} is not a run folder (no meta.json)")
-    meta = json.loads(meta_path.read_text())
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (ValueError, OSError) as exc:
+        raise UserError(f"{meta_path} is damaged ({_short(exc)}); {_RETRAIN}") from None
+    if not isinstance(meta, dict) or "method" not in meta:
+        raise UserError(f"{meta_path} names no method; {_RETRAIN}")
     if not meta.get("complete"):
         raise ConfigError(f"run {run} is not finished; continue it with --resume")
-    return str(meta["method"])
+    return meta
+
+
+def run_method(run: Path) -> str:
+    """The method a finished run folder holds (from its meta.json)."""
+    return str(run_meta(run)["method"])
+
+
+def model_file(run: Path) -> Path:
+    """The model file of a finished run, checked to be a whole zip archive (cheap: no torch)."""
+    run = Path(run)
+    path = run / ("tabnet.zip" if run_method(run) == "il" else "model.zip")
+    if not path.is_file():
+        raise UserError(f"run {run} has no {path.name}; {_RETRAIN}")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        raise UserError(f"{path} is damaged ({_short(exc)}); {_RETRAIN}") from None
+    if bad is not None:
+        raise UserError(f"{path} is damaged (member {bad} fails its checksum); {_RETRAIN}")
+    return path
 
 
 def load_policy(
@@ -96,9 +137,7 @@ def load_policy(
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")
     method = run_method(run)
+    model = model_file(run)
     if method == "il":
-        return TabNetPolicy(run / "tabnet.zip")
-    model = run / "model.zip"
-    if not model.is_file():
-        raise ConfigError(f"run {run} has no model.zip")
+        return TabNetPolicy(model)
     return PPOPolicy(model, method, device)

@@ -13,12 +13,12 @@ import multiprocessing as mp
 import os
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from pirl.agents.config import RunConfig
-from pirl.agents.loading import BUILTIN, LABELS, run_method
+from pirl.agents.loading import BUILTIN, LABELS, model_file, run_meta
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import write_summary
 from pirl.world.config import ConfigError, VCPPConfig
@@ -38,14 +38,28 @@ class MethodSpec:
     max_calls: int = 0
 
 
-def spec_for_run(run: Path) -> MethodSpec:
-    """The spec of a finished run; PIRL runs are keyed by their advisor (oracle is labelled)."""
-    method = run_method(run)
-    meta = json.loads((Path(run) / "meta.json").read_text())
-    key, label = method, LABELS.get(method, method)
-    advisor = meta.get("advisor") or ""
+def run_label(meta: dict[str, Any]) -> str:
+    """A run's full label: ``meta["label"]`` when the run records one, else derived from its
+    method and advisor (the oracle is labelled as not an LLM)."""
+    if meta.get("label"):
+        return str(meta["label"])
+    method = str(meta["method"])
+    advisor = str(meta.get("advisor") or "")
     if method == "pirl" and "oracle" in advisor:
-        key, label = "pirl-oracle", "PIRL (oracle advisor, not an LLM)"
+        return "PIRL (oracle advisor, not an LLM)"
+    if method == "pirl" and advisor:
+        return f"PIRL ({advisor})"
+    return LABELS.get(method, method)
+
+
+def spec_for_run(run: Path) -> MethodSpec:
+    """The spec of a finished run, labelled by :func:`run_label`; PIRL with the oracle has its
+    own key. Runs sharing a key but not a label are told apart by :func:`evaluate`."""
+    meta = run_meta(Path(run))
+    model_file(Path(run))  # a missing or damaged model is reported here, before any work
+    method = str(meta["method"])
+    label = run_label(meta)
+    key = "pirl-oracle" if method == "pirl" and "oracle" in label.lower() else method
     return MethodSpec(key, label, str(run), meta.get("seed"), None)
 
 
@@ -87,10 +101,26 @@ class EvalPlan:
 _POLICIES: dict[tuple, Any] = {}
 
 
+def _file_identity(source: str) -> tuple:
+    """Path, mtime and size of a run's model files: a model retrained into the same folder is
+    a new policy, never the cached old one."""
+    if source in BUILTIN:
+        return ()
+    ident = []
+    for name in ("model.zip", "tabnet.zip", "meta.json"):
+        path = Path(source) / name
+        try:
+            st = path.stat()
+        except OSError:
+            continue
+        ident.append((str(path.resolve()), st.st_mtime_ns, st.st_size))
+    return tuple(ident)
+
+
 def _policy(spec: MethodSpec, config: RunConfig) -> Any:
     from pirl.agents.loading import load_policy
 
-    cache_key = (spec.key, spec.source, spec.advisor)
+    cache_key = (spec.key, spec.source, spec.advisor, spec.max_calls, _file_identity(spec.source))
     if cache_key not in _POLICIES:
         advisor = None
         if spec.advisor is not None:
@@ -179,6 +209,7 @@ def evaluate(
             raise ConfigError(f"--sim {sim!r}: available simulators are {', '.join(SIMS)}")
     if not plan.specs:
         raise ConfigError("nothing to evaluate: give --runs and/or --methods")
+    plan.specs = distinct_specs(plan.specs)
     _check_observations(plan)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -222,6 +253,82 @@ def evaluate(
         )
     )
     return out / "summary.csv"
+
+
+# Settings that do not make two runs different methods: when and how `reproduce` runs them.
+_SEED_ONLY = ("reproduce.", "train.log_every_s", "train.checkpoint_every")
+
+
+def distinct_specs(specs: list[MethodSpec]) -> list[MethodSpec]:
+    """Check that results cannot mix, and give each label its own key.
+
+    The same run twice (``--runs A A``) is refused; so are runs with the same label and seed
+    (copies of one run). Runs with the same label are seeds of one row only when their
+    configs match in everything but the seed; otherwise they are refused with the first
+    difference. Runs that share a key (a method) but not a label get keys of their own, so
+    their episodes never pool.
+    """
+    seen: dict[str, MethodSpec] = {}
+    by_label: dict[str, MethodSpec] = {}
+    for spec in specs:
+        if spec.source in BUILTIN:
+            where = spec.source + "|" + str(spec.advisor) + "|" + str(spec.max_calls)
+        else:
+            where = str(Path(spec.source).resolve())
+        if where in seen:
+            raise ConfigError(f"{spec.source} is given twice; each run counts once")
+        seen[where] = spec
+        if spec.source in BUILTIN:
+            continue
+        first = by_label.setdefault(spec.label, spec)
+        if first is spec:
+            continue
+        if first.train_seed == spec.train_seed:
+            raise ConfigError(
+                f"{first.source} and {spec.source} are both {spec.label!r} with seed "
+                f"{spec.train_seed}: copies of one run count once; give one of them"
+            )
+        diff = _config_difference(Path(first.source), Path(spec.source))
+        if diff is not None:
+            key, a, b = diff
+            raise ConfigError(
+                f"{first.source} and {spec.source} share the label {spec.label!r} but differ in "
+                f"{key} ({a!r} vs {b!r}), not only in the seed: evaluate them separately"
+            )
+    labels_per_key: dict[str, set[str]] = {}
+    for spec in specs:
+        labels_per_key.setdefault(spec.key, set()).add(spec.label)
+    out = []
+    for spec in specs:
+        if len(labels_per_key[spec.key]) > 1:
+            spec = replace(spec, key=f"{spec.key}:{_slug(spec.label)}")
+        out.append(spec)
+    return out
+
+
+def _slug(label: str) -> str:
+    words = "".join(c.lower() if c.isalnum() or c == "." else " " for c in label).split()
+    return "-".join(words)
+
+
+def _config_difference(a: Path, b: Path) -> tuple[str, Any, Any] | None:
+    """The first setting (section.key) in which two runs' config.yaml differ, seed aside."""
+    import yaml
+
+    def flat(run: Path) -> dict[str, Any]:
+        path = run / "config.yaml"
+        data = yaml.safe_load(path.read_text()) if path.is_file() else {}
+        out: dict[str, Any] = {}
+        for section, values in (data or {}).items():
+            for key, value in (values or {}).items() if isinstance(values, dict) else []:
+                out[f"{section}.{key}"] = value
+        return out
+
+    fa, fb = flat(a), flat(b)
+    for key in sorted(fa.keys() | fb.keys()):
+        if not key.startswith(_SEED_ONLY) and fa.get(key) != fb.get(key):
+            return key, fa.get(key), fb.get(key)
+    return None
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:

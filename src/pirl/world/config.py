@@ -51,6 +51,12 @@ class ConfigError(ValueError):
     """A configuration value is unknown, of the wrong type, or impossible."""
 
 
+class UserError(ConfigError):
+    """A mistake the user can fix that is not a config value: a missing API key, a damaged or
+    missing run file, an expert run that cannot serve. The command line prints it as one line
+    (like every ConfigError) and exits with code 2."""
+
+
 def zoom_to_tenths(zoom: float, key: str = "zoom") -> int:
     """Convert a zoom factor to integer tenths, refusing values off the 0.1 grid."""
     tenths = round(zoom * 10)
