@@ -165,7 +165,7 @@ class TrainJob(NamedTuple):
 
 def _train_job(job: TrainJob, cfg: RunConfig, *expert_done: Any) -> float:
     """Remote side: the same call as the sequential loop makes. ``expert_done`` only orders."""
-    from pirl.evaluate.reproduce import train_one
+    from pirl.agents.runs import train_one
 
     start = time.perf_counter()
     train_one(job.method, job.advisor, job.seed, cfg, job.run, job.resume, show_progress=False)

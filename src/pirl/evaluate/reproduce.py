@@ -17,6 +17,7 @@ from typing import Any
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
+from pirl.agents.runs import train_one
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.world.config import ConfigError
@@ -32,21 +33,6 @@ def _run_state(run: Path) -> str:
     if checkpoint.latest(run / "checkpoints") is not None:
         return "resumable"
     return "broken" if run.exists() else "absent"
-
-
-def train_one(
-    method: str, adv: str, seed: int, cfg: RunConfig, run: Path, resume: bool, show_progress: bool
-) -> None:
-    """One run of the plan (also what a Ray worker calls; see pirl.evaluate.distributed)."""
-    from pirl.agents.imitation import train_il
-    from pirl.agents.train import train
-
-    if method == "il":
-        expert = run.parent / f"ppo-ewri-s{seed}"
-        train_il(cfg, expert, run, seed=seed, resume=run.exists())
-    else:
-        run_cfg = cfg.with_overrides(pare={"advisor": adv}) if adv else cfg
-        train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
 
 
 def train_all(
