@@ -24,8 +24,8 @@ import numpy as np
 from pirl.advice.cache import CachedAdvisor
 from pirl.advice.local import LocalAdvisor
 from pirl.advice.prompt import build_prompt
+from pirl.advice.state import prompt_state
 from pirl.env import make_vec_env
-from pirl.pare.state import prompt_state
 from pirl.pare.wrapper import PAREVecEnv
 
 SETTINGS = {"size": (15, 15, 3), "reward": "ewri", "llm_weight": True}

@@ -42,7 +42,7 @@ class HashAdvisor(Advisor):
     def settings_key(self) -> str:
         return self.setting
 
-    def advise(self, prompts: list[str]) -> list[Answer]:
+    def advise(self, prompts: list[str], views=None) -> list[Answer]:
         self.batches.append(list(prompts))
         answers = []
         for p in prompts:
@@ -134,7 +134,7 @@ def test_pickles_without_its_connection(tmp_path: Path) -> None:
 
 def test_broken_inner_advisor_does_not_raise(tmp_path: Path) -> None:
     class Broken(HashAdvisor):
-        def advise(self, prompts):
+        def advise(self, prompts, views=None):
             raise RuntimeError("bug")
 
     cached = CachedAdvisor(Broken(), tmp_path / "c.sqlite")
@@ -152,7 +152,7 @@ WRITER = textwrap.dedent(
         name, model, label = "hash", "sha256", "hash advisor"
         def settings_key(self):
             return "a"
-        def advise(self, prompts):
+        def advise(self, prompts, views=None):
             out = []
             for p in prompts:
                 h = hashlib.sha256(p.encode()).digest()

@@ -31,7 +31,7 @@ class Mute(Advisor):
     def settings_key(self) -> str:
         return "-"
 
-    def advise(self, prompts):
+    def advise(self, prompts, views=None):
         return [Answer("no idea", None) for _ in prompts]
 
 

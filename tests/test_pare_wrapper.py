@@ -25,9 +25,9 @@ class SlowOracle(OracleAdvisor):
     def __init__(self, delay: float) -> None:
         self.delay = delay
 
-    def advise(self, prompts, contexts=None):
+    def advise(self, prompts, views=None):
         time.sleep(self.delay)
-        return super().advise(prompts, contexts)
+        return super().advise(prompts, views)
 
 
 class Unreadable(Advisor):
@@ -38,7 +38,7 @@ class Unreadable(Advisor):
     def settings_key(self) -> str:
         return "-"
 
-    def advise(self, prompts):
+    def advise(self, prompts, views=None):
         return [Answer("I think the drone should fly somewhere nice.", None) for _ in prompts]
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from pirl.advice.recommendation import Recommendation
 
@@ -48,19 +50,27 @@ class Advisor(ABC):
 
     Subclasses set ``name`` (backend kind, e.g. ``"local"``), ``model`` (model identifier) and
     ``label`` (what reports print), and implement :meth:`settings_key` and :meth:`advise`.
+
+    Every advisor takes an optional world view per prompt. An LLM reads only the prompt and
+    ignores views; an advisor that plans from the map (the oracle) sets ``wants_view`` and
+    answers with an error for a prompt that comes without one. Build both with
+    :func:`pirl.advice.state.advice_requests`.
     """
 
     name: str = "advisor"
     model: str = ""
     label: str = "advisor"
+    wants_view: bool = False
+    """Whether answers depend on the world view (the map), not only on the prompt."""
 
     @abstractmethod
     def settings_key(self) -> str:
         """A stable text of every generation setting that can change an answer (cache key)."""
 
     @abstractmethod
-    def advise(self, prompts: list[str]) -> list[Answer]:
-        """Answers to ``prompts``, in the same order.
+    def advise(self, prompts: list[str], views: Sequence[Any] | None = None) -> list[Answer]:
+        """Answers to ``prompts``, in the same order (``views``: one
+        :class:`~pirl.world.planning.WorldView` per prompt, or None).
 
         A failed call never raises: it becomes ``Answer(error=..., recommendation=None)``.
         """

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Sequence
 from typing import Any
 
 from pirl.advice.base import Advisor, Answer, error_answer
@@ -109,6 +110,7 @@ class BudgetedAdvisor(Advisor):
         self.name = advisor.name
         self.model = advisor.model
         self.label = advisor.label
+        self.wants_view = advisor.wants_view
 
     @property
     def exhausted(self) -> bool:
@@ -129,13 +131,15 @@ class BudgetedAdvisor(Advisor):
         """The inner advisor's settings key (the budget does not change answers)."""
         return self.inner.settings_key()
 
-    def advise(self, prompts: list[str]) -> list[Answer]:
+    def advise(self, prompts: list[str], views: Sequence[Any] | None = None) -> list[Answer]:
         """Inner answers for the prompts the budget allows, refusals for the rest."""
         granted = self.budget.reserve(len(prompts))
         answers: list[Answer] = []
         if granted:
             try:
-                answers = list(self.inner.advise(prompts[:granted]))
+                answers = list(
+                    self.inner.advise(prompts[:granted], None if views is None else views[:granted])
+                )
             except Exception as exc:  # noqa: BLE001 - an advisor that broke its contract
                 answers = [error_answer(f"{type(exc).__name__}: {exc}") for _ in range(granted)]
             self.budget.charge_tokens(sum(a.prompt_tokens + a.completion_tokens for a in answers))

@@ -15,6 +15,7 @@ import os
 import sqlite3
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,7 @@ class CachedAdvisor(Advisor):
         self.name = advisor.name
         self.model = advisor.model
         self.label = advisor.label
+        self.wants_view = advisor.wants_view
         self.hits = 0
         self.misses = 0
         self._lock = threading.Lock()
@@ -140,8 +142,13 @@ class CachedAdvisor(Advisor):
                 conn.execute("ROLLBACK")
                 raise
 
-    def advise(self, prompts: list[str]) -> list[Answer]:
-        """Cached answers where present; one inner batch for the rest; never raises."""
+    def advise(self, prompts: list[str], views: Sequence[Any] | None = None) -> list[Answer]:
+        """Cached answers where present; one inner batch for the rest; never raises.
+
+        The key is the prompt alone, so an advisor that reads views is never cached here.
+        """
+        if self.inner.wants_view:
+            return self.inner.advise(prompts, views)
         if not prompts:
             return []
         started = time.perf_counter()

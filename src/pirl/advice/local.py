@@ -548,7 +548,7 @@ class LocalAdvisor(Advisor):
         )
         return str(text) + self.prefill
 
-    def advise(self, prompts: list[str]) -> list[Answer]:
+    def advise(self, prompts: list[str], views: Sequence[Any] | None = None) -> list[Answer]:
         """Answers in prompt order; prompts of similar length are batched together."""
         answers: list[Answer | None] = [None] * len(prompts)
         try:

@@ -12,6 +12,7 @@ import os
 import random
 import re
 import time
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import urlparse
@@ -123,7 +124,7 @@ class OpenAIAdvisor(Advisor):
         }
         return json.dumps(settings, sort_keys=True)
 
-    def advise(self, prompts: list[str]) -> list[Answer]:
+    def advise(self, prompts: list[str], views: Sequence[Any] | None = None) -> list[Answer]:
         """Answers in prompt order, at most ``concurrency`` requests at a time; never raises."""
         if not prompts:
             return []

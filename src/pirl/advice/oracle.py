@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-from pirl.advice.base import Advisor, Answer
+from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.recommendation import Recommendation
 from pirl.world.planning import WorldView, largest_footprint_camera, nearest, useful_map
 
@@ -34,25 +34,27 @@ def oracle_recommendation(view: WorldView) -> Recommendation:
     return Recommendation(pan=pan, tilt=tilt, zoom=zoom10 / 10.0, dx=dx, dy=dy, dz=dz)
 
 
+NO_VIEW = "the oracle plans from the map: it needs a world view with each prompt"
+
+
 class OracleAdvisor(Advisor):
-    """Advice computed from the map. ``advise`` needs one :class:`WorldView` per prompt."""
+    """Advice computed from the map (one :class:`WorldView` per prompt)."""
 
     name = "oracle"
     model = "geometric"
     label = ORACLE_LABEL
-    needs_context = True
+    wants_view = True
     cacheable = False
 
     def settings_key(self) -> str:
         return "oracle-v1"
 
-    def advise(
-        self, prompts: list[str], contexts: Sequence[WorldView] | None = None
-    ) -> list[Answer]:
-        if contexts is None or len(contexts) != len(prompts):
-            raise ValueError("the oracle needs one WorldView context per prompt")
+    def advise(self, prompts: list[str], views: Sequence[WorldView] | None = None) -> list[Answer]:
+        """The oracle's answer for each view; an error answer where a prompt has none."""
+        if views is None or len(views) != len(prompts):
+            return [error_answer(NO_VIEW) for _ in prompts]
         answers = []
-        for view in contexts:
+        for view in views:
             start = time.perf_counter()
             rec = oracle_recommendation(view)
             answers.append(Answer(rec.to_text(), rec, latency_s=time.perf_counter() - start))

@@ -1,9 +1,18 @@
-"""What PARE shows the advisor: a world's state as a prompt (and, for the oracle, its map)."""
+"""What an advisor is shown about a world: its prompt, and for advisors that plan from the map
+(the oracle) a frozen :class:`~pirl.world.planning.WorldView`.
+
+PARE, the student's teacher queue, LLM-only and ``pirl advise`` all build their requests here,
+so every caller shows an advisor the same thing.
+"""
 
 from __future__ import annotations
 
-from pirl.advice.prompt import PromptState
+from collections.abc import Iterable
+from typing import Any
+
+from pirl.advice.prompt import PromptState, build_prompt
 from pirl.world import dynamics as D
+from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
 
@@ -28,3 +37,25 @@ def prompt_state(world: WorldBatch, e: int) -> PromptState:
         obstacles=obstacles,
         max_range=cfg.max_range,
     )
+
+
+def advice_requests(
+    world: WorldBatch,
+    worlds: Iterable[int],
+    advisor: Any,
+    prompt_variant: str = "paper",
+    decimals: int = 2,
+) -> tuple[list[str], list[WorldView] | None]:
+    """Prompts for ``worlds`` now, plus frozen world views when ``advisor.wants_view``.
+
+    Pass both to ``advisor.advise(prompts, views)``.
+    """
+    indices = [int(e) for e in worlds]
+    prompts = [build_prompt(prompt_state(world, e), prompt_variant, decimals) for e in indices]
+    views = None
+    if getattr(advisor, "wants_view", False):
+        views = [WorldView.of(world, e, copy=True) for e in indices]
+    return prompts, views
+
+
+__all__ = ["advice_requests", "prompt_state"]

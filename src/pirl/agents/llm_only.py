@@ -15,10 +15,9 @@ from typing import Any
 import numpy as np
 
 from pirl.advice.base import Advisor
-from pirl.advice.prompt import build_prompt
 from pirl.advice.recommendation import Recommendation
+from pirl.advice.state import advice_requests
 from pirl.agents.policy import Policy, hold_action
-from pirl.pare.state import prompt_state
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
@@ -70,13 +69,11 @@ class LLMOnlyPolicy(Policy):
         budget_left = not self.max_calls or self.episode_calls < self.max_calls
         if not self.queue and budget_left:
             self.episode_calls += 1
-            prompt = build_prompt(prompt_state(self.world, self.e), self.prompt_variant)
+            prompts, views = advice_requests(
+                self.world, [self.e], self.advisor, self.prompt_variant
+            )
             self.calls += 1
-            if getattr(self.advisor, "needs_context", False):
-                context = [WorldView.of(self.world, self.e, copy=True)]
-                answer = self.advisor.advise([prompt], context)[0]
-            else:
-                answer = self.advisor.advise([prompt])[0]
+            answer = self.advisor.advise(prompts, views)[0]
             if answer.recommendation is None:
                 self.failed += 1
             else:

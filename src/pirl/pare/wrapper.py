@@ -40,13 +40,11 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.factory import exhausted
-from pirl.advice.prompt import build_prompt
+from pirl.advice.state import advice_requests
 from pirl.env.vec_env import VCPPVecEnv
 from pirl.pare.alignment import _align_one
-from pirl.pare.state import prompt_state
 from pirl.world import dynamics as D
 from pirl.world.config import ConfigError
-from pirl.world.planning import WorldView
 
 STATUSES = ("missing", "fresh", "cached", "stale")
 _MISSING, _FRESH, _CACHED, _STALE = range(4)
@@ -202,16 +200,10 @@ class PAREVecEnv(VecEnvWrapper):
         if not worlds.size or exhausted(self.advisor):
             self.stats.budget_exhausted = exhausted(self.advisor)
             return
-        w = self._world
-        prompts = [
-            build_prompt(prompt_state(w, int(e)), self.prompt_variant, self.decimals)
-            for e in worlds
-        ]
-        if getattr(self.advisor, "needs_context", False):
-            contexts = [WorldView.of(w, int(e), copy=True) for e in worlds]
-            future = self._pool.submit(self.advisor.advise, prompts, contexts)
-        else:
-            future = self._pool.submit(self.advisor.advise, prompts)
+        prompts, views = advice_requests(
+            self._world, worlds, self.advisor, self.prompt_variant, self.decimals
+        )
+        future = self._pool.submit(self.advisor.advise, prompts, views)
         self._job = _Job(worlds, self._episode[worlds].copy(), self._t, future)
         self.stats.prompts_sent += len(prompts)
         self.stats.batches_sent += 1
