@@ -396,11 +396,9 @@ def advise(
     import time
 
     from pirl.advice.factory import make_advisor
-    from pirl.advice.prompt import build_prompt
+    from pirl.advice.state import advice_requests
     from pirl.agents.config import RunConfig
     from pirl.env import VCPPEnv
-    from pirl.pare.state import prompt_state
-    from pirl.world.planning import WorldView
 
     cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
     if base_url is None:
@@ -414,16 +412,14 @@ def advise(
         cfg = cfg.with_overrides(advisor=changes)
     env = VCPPEnv(cfg.env.replace(size=tuple(size)))
     env.reset(seed=seed)
-    prompt = build_prompt(prompt_state(env.world, 0), cfg.pare.prompt_variant)
-    console.rule("prompt")
-    console.print(prompt, markup=False, highlight=False)
     start = time.perf_counter()
     backend = make_advisor(advisor, cfg, cache=cache)
     loaded = time.perf_counter() - start
-    if getattr(backend, "needs_context", False):
-        answer = backend.advise([prompt], [WorldView.of(env.world, 0, copy=True)])[0]
-    else:
-        answer = backend.advise([prompt])[0]
+    prompts, views = advice_requests(env.world, [0], backend, cfg.pare.prompt_variant)
+    prompt = prompts[0]
+    console.rule("prompt")
+    console.print(prompt, markup=False, highlight=False)
+    answer = backend.advise(prompts, views)[0]
     console.rule(f"answer from {backend.label}")
     console.print(answer.text or "(no text)", markup=False, highlight=False)
     console.rule("result")
