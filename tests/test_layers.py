@@ -19,7 +19,9 @@ PACKAGE = SRC / "pirl"
 # step with docs/architecture.md.
 LAYERS = (
     ("pirl", "pirl._numba_cache"),  # the package root: numba cache set-up, env registration
-    ("pirl.world",),  # grid, scenarios, footprints, rules, metrics, planning queries
+    # Grid, scenarios, footprints, rules, metrics, planning queries. physics.config is plain
+    # settings (it imports world.config only), so the run config of agents may hold it.
+    ("pirl.world", "pirl.physics.config"),
     ("pirl.env",),  # Gymnasium / SB3 environments over the world
     ("pirl.advice",),  # prompts, advisors, parsing, cache, budget
     ("pirl.pare",),  # reward shaping with advice
