@@ -13,6 +13,7 @@ from typing import Any
 
 import yaml
 
+from pirl.physics.config import PhysicsConfig
 from pirl.world.config import ConfigError, VCPPConfig, check_keys
 
 
@@ -181,6 +182,8 @@ class RunConfig:
     advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
     il: ILSettings = field(default_factory=ILSettings)
     reproduce: ReproduceSettings = field(default_factory=ReproduceSettings)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -189,8 +192,9 @@ class RunConfig:
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
         if not isinstance(data, dict):
             raise ConfigError("a run config is a mapping of sections")
-        check_keys(data, ["env", *_SECTIONS])
+        check_keys(data, ["env", *_SECTIONS, "physics"])
         parts: dict[str, Any] = {"env": VCPPConfig.from_dict(data.get("env") or {})}
+        parts["physics"] = PhysicsConfig.from_dict(data.get("physics") or {})
         for name, section in _SECTIONS.items():
             values = data.get(name) or {}
             if not isinstance(values, dict):
@@ -216,6 +220,7 @@ class RunConfig:
         for name in _SECTIONS:
             values = asdict(getattr(self, name))
             out[name] = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+        out["physics"] = self.physics.to_dict()
         return out
 
     def with_overrides(self, **sections: dict[str, Any]) -> RunConfig:

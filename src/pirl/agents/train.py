@@ -83,10 +83,10 @@ def prepare_run_folder(out: Path, resume: bool, log: Any = None) -> tuple[Path, 
     return None
 
 
-# Settings a resumed run may change: how long it runs, how often it checkpoints and logs, and
-# what `pirl reproduce` does around it. Everything else that the method uses (PARE and the
-# advisor for PIRL only) must match the run's config.yaml.
-RESUME_MAY_CHANGE = ("train.", "reproduce.")
+# Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
+# `pirl reproduce` does around it and how the physics simulator evaluates it. Everything else
+# that the method uses (PARE and the advisor for PIRL only) must match the run's config.yaml.
+RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.")
 
 
 def resolved_config(method: str, cfg: RunConfig) -> RunConfig:

@@ -162,7 +162,7 @@ def run_chunk(
         if sim == "physics":
             from pirl.physics import run_physics_episode
 
-            metrics = run_physics_episode(env_cfg, policy, seed)
+            metrics = run_physics_episode(env_cfg, policy, seed, config.physics)
         else:
             metrics = run_episode(env, policy, seed).metrics
         records.append(
@@ -248,6 +248,7 @@ def evaluate(
                 "episodes_per_method": plan.episodes_per_method,
                 "sims": plan.sims,
                 "env": env_dict,
+                "physics": config_dict["physics"],
             },
             indent=2,
         )
@@ -255,8 +256,8 @@ def evaluate(
     return out / "summary.csv"
 
 
-# Settings that do not make two runs different methods: when and how `reproduce` runs them.
-_SEED_ONLY = ("reproduce.", "train.log_every_s", "train.checkpoint_every")
+# Settings that do not make two runs different methods: how `reproduce` runs and evaluates them.
+_SEED_ONLY = ("reproduce.", "physics.", "train.log_every_s", "train.checkpoint_every")
 
 
 def distinct_specs(specs: list[MethodSpec]) -> list[MethodSpec]:

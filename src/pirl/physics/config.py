@@ -103,8 +103,6 @@ def _validate(cfg: PhysicsConfig) -> None:
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
             raise ConfigError(f"physics.{name}={value!r}: must be a number >= 0")
-    if cfg.camera_energy is not None and not cfg.camera_energy >= 0:
-        raise ConfigError(f"physics.camera_energy={cfg.camera_energy!r}: must be >= 0 or None")
     wind = cfg.wind_mean
     if not (
         isinstance(wind, tuple | list)
@@ -121,6 +119,16 @@ def _validate(cfg: PhysicsConfig) -> None:
         raise ConfigError(
             f"physics.control_hz={cfg.control_hz} must divide physics_hz={cfg.physics_hz}"
         )
+    if not isinstance(cfg.stabilized_gimbal, bool):
+        raise ConfigError(f"physics.stabilized_gimbal={cfg.stabilized_gimbal!r}: true or false")
+    for name in ("recover_tilt_deg", "camera_energy"):
+        value = getattr(cfg, name)
+        if (value is not None or name != "camera_energy") and (
+            isinstance(value, bool) or not isinstance(value, int | float)
+        ):
+            raise ConfigError(f"physics.{name}={value!r}: expected a number")
+    if cfg.camera_energy is not None and not cfg.camera_energy >= 0:
+        raise ConfigError(f"physics.camera_energy={cfg.camera_energy!r}: must be >= 0 or None")
     if not 0 < cfg.recover_tilt_deg <= 180:
         raise ConfigError(f"physics.recover_tilt_deg={cfg.recover_tilt_deg!r}: allowed (0, 180]")
 
