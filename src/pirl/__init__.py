@@ -1,6 +1,7 @@
 """PIRL: prompt-informed reinforcement learning for UAV visual coverage path planning.
 
-``import pirl`` registers the Gymnasium environment ``pirl/VCPP-v0``.
+``import pirl`` registers the Gymnasium environment ``pirl/VCPP-v0``, with its batched
+version as the vector entry point (``gymnasium.make_vec("pirl/VCPP-v0", num_envs=N)``).
 """
 
 from pirl import _numba_cache
@@ -13,4 +14,8 @@ import gymnasium as _gym  # noqa: E402
 __version__ = "0.1.0"
 
 if "pirl/VCPP-v0" not in _gym.registry:
-    _gym.register(id="pirl/VCPP-v0", entry_point="pirl.env.vcpp_env:VCPPEnv")
+    _gym.register(
+        id="pirl/VCPP-v0",
+        entry_point="pirl.env.vcpp_env:VCPPEnv",
+        vector_entry_point="pirl.env.vector:VCPPVectorEnv",
+    )

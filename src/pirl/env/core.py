@@ -111,17 +111,21 @@ class EnvCore:
     def truncated(self) -> np.ndarray:
         return self.world.flags[:, D.F_TRUNCATED].astype(bool)
 
+    def infos_snapshot(self) -> InfoSnapshot:
+        """Copies of what every world's info is made of, as of the last step or reset (with
+        the episode metrics of the worlds whose episode just ended)."""
+        w = self.world
+        done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
+        metrics = {int(e): episode_metrics(w, int(e)) for e in done}
+        return InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
+
     def infos(self, worlds: list[int] | None = None, lazy: bool = False) -> list[dict[str, Any]]:
         """The ``info`` dict of each world (all by default), as of the last step or reset.
 
         With ``lazy`` the dicts are :class:`~pirl.env.info.LazyInfo` (filled on first read).
         """
-        w = self.world
         idx = range(self.num) if worlds is None else worlds
-        done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
-        metrics = {int(e): episode_metrics(w, int(e)) for e in done}
-        snap = InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
-        self.snapshot = snap
+        snap = self.snapshot = self.infos_snapshot()
         if lazy:
             return list(map(LazyInfo, repeat(snap), idx))
         return [snap.info(e) for e in idx]

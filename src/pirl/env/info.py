@@ -84,6 +84,51 @@ class InfoSnapshot:
             info[key] = build(e)
         return info
 
+    def vector_info(self) -> dict[str, Any]:
+        """Every world's info as Gymnasium's vector envs give it: a dict of arrays (first axis
+        = world), each key ``k`` with a boolean mask ``_k`` of the worlds that have it."""
+        n = self.ints.shape[0]
+        r, f = self.ints, self.flags
+        out: dict[str, Any] = {}
+
+        def put(into: dict[str, Any], key: str, value: Any, mask: np.ndarray | None = None) -> None:
+            into[key] = value
+            into["_" + key] = np.ones(n, dtype=np.bool_) if mask is None else mask
+
+        for key, table in (("reward_terms", self.terms), ("reward_weights", self.weights)):
+            inner: dict[str, Any] = {}
+            for k, name in enumerate(REWARD_TERMS):
+                put(inner, name, table[:, k].copy())
+            put(out, key, inner)
+        put(out, "new_cells", f[:, D.F_NEW].copy())
+        put(out, "covered", r[:, D.COVERED].copy())
+        put(out, "coverable", r[:, D.COVERABLE].copy())
+        put(out, "battery", np.maximum(0.0, self.energy / self.capacity))
+        for key, col in (
+            ("collision", D.F_COLLISION), ("redundant", D.F_REDUNDANT), ("idle", D.F_IDLE),
+            ("wind", D.F_WIND),
+        ):  # fmt: skip
+            put(out, key, f[:, col].astype(np.bool_))
+        put(out, "position", r[:, [D.PX, D.PY, D.PZ]].copy())
+        camera = r[:, [D.TILT, D.PAN, D.ZOOM]].astype(np.float64)
+        camera[:, 2] /= 10.0
+        put(out, "camera", camera)
+        put(out, "steps", r[:, D.STEPS].copy())
+        if self.metrics:
+            mask = np.zeros(n, dtype=np.bool_)
+            mask[list(self.metrics)] = True
+            names = next(iter(self.metrics.values())).keys()
+            metrics: dict[str, Any] = {}
+            for name in names:
+                column = np.zeros(n, dtype=np.float64)
+                for e, values in self.metrics.items():
+                    column[e] = values[name]
+                put(metrics, name, column, mask.copy())
+            put(out, "episode_metrics", metrics, mask)
+        for key, build in self.extras.items():
+            put(out, key, np.array([build(e) for e in range(n)]))
+        return out
+
 
 class _Pending:
     """Marker kept in a LazyInfo's storage until it is filled (see LazyInfo)."""
@@ -116,12 +161,15 @@ class LazyInfo(dict):
         snap = self._snap
         return snap is not None and (key in INFO_KEYS or key in snap.extras)
 
+    def _build(self, snap: InfoSnapshot) -> dict[str, Any]:
+        return snap.info(self._e)
+
     def _fill(self) -> None:
         snap = self._snap
         if snap is not None:
             self._snap = None
             dict.pop(self, _PENDING, None)
-            for key, value in snap.info(self._e).items():
+            for key, value in self._build(snap).items():
                 dict.setdefault(self, key, value)
 
     def __getitem__(self, key: Any) -> Any:
@@ -218,3 +266,23 @@ class LazyInfo(dict):
 
     def __reduce__(self):
         return (dict, (self.copy(),))
+
+
+class LazyVectorInfo(LazyInfo):
+    """The info of a Gymnasium vector env step (:meth:`InfoSnapshot.vector_info`), built on
+    first read: one object per step, so a training loop that never reads it pays nothing."""
+
+    __slots__ = ()
+
+    def __init__(self, snap: InfoSnapshot) -> None:
+        super().__init__(snap, -1)
+
+    def _lazy(self, key: Any) -> bool:
+        snap = self._snap
+        if snap is None or not isinstance(key, str):
+            return False
+        name = key[1:] if key.startswith("_") else key
+        return name in INFO_KEYS or name in snap.extras
+
+    def _build(self, snap: InfoSnapshot) -> dict[str, Any]:
+        return snap.vector_info()
