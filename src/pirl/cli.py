@@ -476,6 +476,9 @@ def main() -> None:
     """Console entry point."""
     import sys
 
+    from pirl import _quiet
+
+    _quiet.install()
     app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
 
 

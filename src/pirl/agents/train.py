@@ -436,6 +436,9 @@ def train(
     ``advisor`` (pirl only) defaults to the one the config names. Interrupting with Ctrl-C
     writes a checkpoint; ``resume=True`` continues from the latest one.
     """
+    from pirl import _quiet
+
+    _quiet.install()
     out = Path(out)
     log = print if show_progress else (lambda _m: None)
     env_config_for(method, cfg)  # validates the method before touching the disk

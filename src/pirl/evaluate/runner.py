@@ -148,9 +148,13 @@ def run_chunk(
     """Play ``spec`` on each seed of ``size``; one record per episode."""
     import torch
 
+    from pirl import _quiet
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_episode
 
+    _quiet.install()  # a worker process: no third-party banners or deprecation noise
+    if sim == "physics":
+        _quiet.import_quietly("pybullet")
     torch.set_num_threads(1)
     config = RunConfig.from_dict(config_dict)
     env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size))
