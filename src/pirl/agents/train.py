@@ -367,7 +367,7 @@ class Progress:
         self.start = time.perf_counter()
         self.first: int | None = None
         self.first_t = self.start
-        self.last_log = self.start  # the first plain line comes after every_s, with a real fps
+        self.last_log = self.start  # the first plain line comes every_s after the first step
         self.steps = 0
         self.info = ""
         self._bar = None
@@ -397,6 +397,7 @@ class Progress:
         now = time.perf_counter()
         if self.first is None:  # steps of the first vector step (or of the resumed checkpoint)
             self.first, self.first_t = steps, now
+            self.last_log = now  # start-up (compiling, loading) is not training time
         fps = (steps - self.first) / max(1e-9, now - self.first_t)
         info = f"{fps:,.0f} fps"
         if vcr is not None:

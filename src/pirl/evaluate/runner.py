@@ -293,7 +293,7 @@ def distinct_specs(specs: list[MethodSpec]) -> list[MethodSpec]:
                 f"{first.source} and {spec.source} are both {spec.label!r} with seed "
                 f"{spec.train_seed}: copies of one run count once; give one of them"
             )
-        diff = _config_difference(Path(first.source), Path(spec.source))
+        diff = _config_difference(Path(first.source), Path(spec.source), spec.key)
         if diff is not None:
             key, a, b = diff
             raise ConfigError(
@@ -316,9 +316,13 @@ def _slug(label: str) -> str:
     return "-".join(words)
 
 
-def _config_difference(a: Path, b: Path) -> tuple[str, Any, Any] | None:
-    """The first setting (section.key) in which two runs' config.yaml differ, seed aside."""
+def _config_difference(a: Path, b: Path, method: str) -> tuple[str, Any, Any] | None:
+    """The first setting (section.key) in which two runs' config.yaml differ, seed aside and
+    sections the method does not use (PARE and the advisor outside PIRL) aside."""
     import yaml
+
+    unused = () if method.startswith("pirl") else ("pare.", "advisor.")
+    unused += ("train.",) if method == "il" else ("il.",)
 
     def flat(run: Path) -> dict[str, Any]:
         path = run / "config.yaml"
@@ -331,7 +335,7 @@ def _config_difference(a: Path, b: Path) -> tuple[str, Any, Any] | None:
 
     fa, fb = flat(a), flat(b)
     for key in sorted(fa.keys() | fb.keys()):
-        if not key.startswith(_SEED_ONLY) and fa.get(key) != fb.get(key):
+        if not key.startswith(_SEED_ONLY + unused) and fa.get(key) != fb.get(key):
             return key, fa.get(key), fb.get(key)
     return None
 

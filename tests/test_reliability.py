@@ -1,0 +1,344 @@
+"""Runs that cannot go wrong (issue 11): user mistakes answered in one line with nothing
+half-made, resume that continues the run in the folder (kill -9 included), results that never
+mix, every setting reachable, quiet output. CLI cases run as real subprocesses."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+from stable_baselines3 import PPO
+
+from pirl.agents import checkpoint
+from pirl.agents.config import RunConfig
+from pirl.agents.train import Progress, train
+from pirl.evaluate import runner
+from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
+from pirl.evaluate.summary import read_summary
+from pirl.world.config import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+TEST_CFG = ROOT / "configs" / "test.yaml"
+PIRL = [sys.executable, "-m", "pirl"]
+
+
+def _pirl(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [*PIRL, *args], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
+    )
+
+
+def _one_clean_line(proc: subprocess.CompletedProcess, *needles: str) -> str:
+    """Exit code 2, no traceback, exactly one line on stderr holding every needle."""
+    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stderr + proc.stdout
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    return lines[0]
+
+
+def _same_weights(a: Path, b: Path) -> bool:
+    sa = PPO.load(a, device="cpu").policy.state_dict()
+    sb = PPO.load(b, device="cpu").policy.state_dict()
+    return all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """Finished PPO-SR runs of test.yaml: seed 1 and seed 2."""
+    root = tmp_path_factory.mktemp("runs")
+    cfg = RunConfig.from_yaml(TEST_CFG)
+    out = {}
+    for seed in (1, 2):
+        out[f"sr{seed}"] = root / f"sr{seed}"
+        train("ppo-sr", cfg, out[f"sr{seed}"], seed=seed, show_progress=False)
+    return out
+
+
+def _copy(run: Path, dest: Path) -> Path:
+    shutil.copytree(run, dest)
+    return dest
+
+
+# -- user mistakes: one line, exit 2, no traceback, nothing half-made -------------------------
+def test_openai_without_key_is_one_line_and_makes_no_folder(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "OPENAI_API_KEY"}
+    out = tmp_path / "run"
+    proc = _pirl(
+        "train", "--method", "pirl", "--advisor", "openai", "--config", str(TEST_CFG),
+        "--out", str(out), cwd=tmp_path, env=env,
+    )  # fmt: skip
+    _one_clean_line(proc, "OPENAI_API_KEY")
+    assert not out.exists()
+
+
+def test_damaged_or_missing_model_files_are_named(runs, tmp_path):
+    bad = _copy(runs["sr1"], tmp_path / "bad")
+    (bad / "model.zip").write_bytes((bad / "model.zip").read_bytes()[:300])
+    ev = tmp_path / "eval"
+    proc = _pirl("evaluate", "--runs", str(bad), "--sizes", "16", "--episodes", "1",
+                 "--out", str(ev), cwd=tmp_path)  # fmt: skip
+    _one_clean_line(proc, str(bad / "model.zip"), "damaged")
+    assert not ev.exists()
+
+    il = tmp_path / "il"
+    il.mkdir()
+    (il / "meta.json").write_text(json.dumps({"method": "il", "seed": 0, "complete": True}))
+    proc = _pirl("evaluate", "--runs", str(il), "--out", str(ev), cwd=tmp_path)
+    _one_clean_line(proc, "tabnet.zip")
+    assert not ev.exists()
+
+
+@pytest.mark.parametrize("damage", ["corrupt", "no-model", "not-a-run"])
+def test_il_with_a_bad_expert_makes_no_folder(runs, tmp_path, damage):
+    expert = tmp_path / "expert"
+    if damage == "corrupt":
+        _copy(runs["sr1"], expert)
+        (expert / "model.zip").write_bytes(b"PK\x03\x04 not really a zip")
+    elif damage == "no-model":
+        _copy(runs["sr1"], expert)
+        (expert / "model.zip").unlink()
+    out = tmp_path / "il"
+    proc = _pirl("train", "--method", "il", "--expert", str(expert), "--config", str(TEST_CFG),
+                 "--out", str(out), cwd=tmp_path)  # fmt: skip
+    _one_clean_line(proc, str(expert))
+    assert not out.exists()
+
+
+def test_truncated_latest_checkpoint_falls_back_to_the_previous_one(runs, tmp_path):
+    run = _copy(runs["sr1"], tmp_path / "run")
+    # Make it an interrupted run: no final model, and the newest checkpoint cut short.
+    (run / "model.zip").unlink()
+    meta = json.loads((run / "meta.json").read_text())
+    (run / "meta.json").write_text(json.dumps({**meta, "complete": False}))
+    ckpts = run / "checkpoints"
+    latest = checkpoint.latest(ckpts)
+    state = latest / "state.pkl"
+    state.write_bytes(state.read_bytes()[: state.stat().st_size // 2])
+    found = checkpoint.load_latest(ckpts)
+    assert found is not None and found[0] != latest
+    proc = _pirl("train", "--method", "ppo-sr", "--out", str(run), "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "damaged" in proc.stdout and "Traceback" not in proc.stderr
+    assert _same_weights(run / "model.zip", runs["sr1"] / "model.zip")
+
+
+# -- resume continues the run that is in the folder ---------------------------------------------
+def test_resume_refuses_a_different_method_seed_advisor_or_value(runs, tmp_path):
+    run = _copy(runs["sr1"], tmp_path / "run")
+    before = (run / "meta.json").read_text()
+    cases = [
+        (["--method", "ppo-ewri"], ["ppo-sr run", "--method ppo-ewri"]),
+        (["--method", "pirl", "--advisor", "oracle"], ["ppo-sr run", "--method pirl"]),
+        (["--method", "ppo-sr", "--seed", "5"], ["seed 1", "--seed 5"]),
+    ]
+    for args, needles in cases:
+        proc = _pirl("train", *args, "--out", str(run), "--resume", cwd=tmp_path)
+        _one_clean_line(proc, *needles)
+    other = tmp_path / "other.yaml"
+    data = yaml.safe_load(TEST_CFG.read_text())
+    data["ppo"]["learning_rate"] = 0.001
+    other.write_text(yaml.safe_dump(data))
+    proc = _pirl("train", "--method", "ppo-sr", "--config", str(other), "--out", str(run),
+                 "--resume", cwd=tmp_path)  # fmt: skip
+    _one_clean_line(proc, "ppo.learning_rate=0.0003", "ppo.learning_rate=0.001")
+    assert (run / "meta.json").read_text() == before  # nothing rewritten
+    # PIRL: a different advisor is a different run.
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(pare={"advisor": "oracle"})
+    pirl = tmp_path / "pirl"
+    train("pirl", cfg, pirl, seed=0, show_progress=False)
+    with pytest.raises(ConfigError, match="pare.advisor='oracle'.*pare.advisor='local'"):
+        train("pirl", cfg.with_overrides(pare={"advisor": "local"}), pirl, resume=True)
+    saved = RunConfig.from_yaml(pirl / "config.yaml")  # the resolved config is what is saved
+    assert saved.env.reward == "ewri" and saved.env.llm_weight is True
+
+
+def test_resume_extends_steps_and_a_finished_run_stays_finished(runs, tmp_path):
+    run = _copy(runs["sr1"], tmp_path / "run")
+    proc = _pirl("train", "--method", "ppo-sr", "--out", str(run), "--resume", cwd=tmp_path)
+    assert proc.returncode == 0 and "already complete" in proc.stdout, proc.stdout + proc.stderr
+    proc = _pirl("train", "--method", "ppo-sr", "--out", str(run), "--resume", "--steps", "640",
+                 cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "extending" in proc.stdout and "640" in proc.stdout
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["complete"] and meta["timesteps"] == 640 and meta["total_steps"] == 640
+    proc = _pirl("train", "--method", "ppo-sr", "--out", str(run), "--resume", "--steps", "256",
+                 cwd=tmp_path)  # fmt: skip
+    _one_clean_line(proc, "256")
+
+
+def test_steps_off_the_rollout_grid_are_said_and_presets_resolve_by_name(tmp_path):
+    out = tmp_path / "run"
+    proc = _pirl("train", "--method", "ppo-ewri", "--config", "test", "--steps", "200",
+                 "--out", str(out), cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "200 steps become 256" in proc.stdout
+    assert json.loads((out / "meta.json").read_text())["timesteps"] == 256
+    saved = RunConfig.from_yaml(out / "config.yaml")
+    assert saved.env.reward == "ewri" and saved.env.llm_weight is False
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("[ppo-ewri]")]
+    assert len(lines) <= 2 and "0 fps" not in " ".join(lines)  # an interval line and a final one
+    proc = _pirl("train", "--method", "ppo-sr", "--config", "nonesuch", "--out",
+                 str(tmp_path / "x"), cwd=tmp_path)  # fmt: skip
+    _one_clean_line(proc, "nonesuch", "quick")
+
+
+def _wait_for(predicate, proc: subprocess.Popen, limit: float = 120) -> None:
+    deadline = time.time() + limit
+    while time.time() < deadline and proc.poll() is None:
+        if predicate():
+            return
+        time.sleep(0.01)
+
+
+def _latest_step(folder: Path) -> int:
+    try:
+        return int((folder / "checkpoints" / "LATEST").read_text().split("_")[1])
+    except (OSError, IndexError, ValueError):
+        return -1
+
+
+def test_kill_9_at_several_points_then_resume_matches_a_straight_run(tmp_path):
+    steps = "2048"
+    cmd = [*PIRL, "train", "--method", "ppo-ewri", "--config", str(TEST_CFG), "--seed", "3",
+           "--steps", steps]  # fmt: skip
+    out = tmp_path / "killed"
+    kill_points = [
+        lambda: out.exists(),  # the folder is being made, before any checkpoint
+        lambda: _latest_step(out) >= 512,  # mid-run, during a rollout
+        lambda: (
+            any((out / "checkpoints").glob(".step_*.tmp"))  # a checkpoint being written
+            or _latest_step(out) >= 1536
+        ),
+        lambda: (out / "model.tmp.zip").exists() or (out / "model.zip").exists(),  # final save
+    ]
+    codes = []
+    for n, point in enumerate(kill_points):
+        args = [*cmd, "--out", str(out)] + (["--resume"] if n else [])
+        proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _wait_for(point, proc)
+        proc.send_signal(signal.SIGKILL)
+        codes.append(proc.wait(timeout=60))
+    assert codes[:3] == [-signal.SIGKILL] * 3, codes  # the final save may win the race
+    resumed = subprocess.run([*cmd, "--out", str(out), "--resume"], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    straight = tmp_path / "straight"
+    subprocess.run([*cmd, "--out", str(straight)], check=True, capture_output=True)
+    assert _same_weights(out / "model.zip", straight / "model.zip")
+    assert (out / "episodes.csv").read_text() == (straight / "episodes.csv").read_text()
+    assert json.loads((out / "meta.json").read_text())["timesteps"] == int(steps)
+
+
+# -- results never mix ----------------------------------------------------------------------
+def _plan(specs, env) -> EvalPlan:
+    return EvalPlan(specs=specs, sizes=[(16, 16, 3)], episodes=2, env=env)
+
+
+def test_runs_with_different_labels_stay_apart_and_seeds_pool(runs, tmp_path):
+    env = RunConfig.from_yaml(TEST_CFG).env
+    a, b = _copy(runs["sr1"], tmp_path / "a"), _copy(runs["sr2"], tmp_path / "b")
+    # Same label, same config, different seeds: one row with both runs' episodes.
+    summary = evaluate(_plan([spec_for_run(a), spec_for_run(b)], env), tmp_path / "pooled")
+    rows = read_summary(summary)
+    assert [(r["label"], r["n"]) for r in rows] == [("PPO-SR", 4.0)]
+    # Different labels (as PIRL runs with two advisors or PARE weights get): two rows.
+    for run, label in ((a, "PPO-SR (variant a)"), (b, "PPO-SR (variant b)")):
+        meta = json.loads((run / "meta.json").read_text())
+        (run / "meta.json").write_text(json.dumps({**meta, "label": label}))
+    summary = evaluate(_plan([spec_for_run(a), spec_for_run(b)], env), tmp_path / "apart")
+    rows = read_summary(summary)
+    assert sorted((r["label"], r["n"]) for r in rows) == [
+        ("PPO-SR (variant a)", 2.0),
+        ("PPO-SR (variant b)", 2.0),
+    ]
+    assert len({r["method"] for r in rows}) == 2
+
+
+def test_same_label_different_config_and_duplicates_are_refused(runs, tmp_path):
+    a, b = _copy(runs["sr1"], tmp_path / "a"), _copy(runs["sr2"], tmp_path / "b")
+    data = yaml.safe_load((b / "config.yaml").read_text())
+    data["ppo"]["learning_rate"] = 0.001
+    (b / "config.yaml").write_text(yaml.safe_dump(data))
+    ev = tmp_path / "eval"
+    proc = _pirl("evaluate", "--runs", str(a), str(b), "--out", str(ev), cwd=tmp_path)
+    _one_clean_line(proc, "ppo.learning_rate", "0.0003", "0.001")
+    proc = _pirl("evaluate", "--runs", str(a), str(a), "--out", str(ev), cwd=tmp_path)
+    _one_clean_line(proc, "twice")
+    c = _copy(runs["sr1"], tmp_path / "c")  # a copy of the same run (same seed)
+    proc = _pirl("evaluate", "--runs", str(a), str(c), "--out", str(ev), cwd=tmp_path)
+    _one_clean_line(proc, "copies of one run")
+    assert not ev.exists()
+
+
+def test_policy_cache_sees_a_model_retrained_into_the_same_folder(runs, tmp_path):
+    run = _copy(runs["sr1"], tmp_path / "run")
+    spec, cfg = spec_for_run(run), RunConfig.from_yaml(TEST_CFG)
+    first = runner._policy(spec, cfg)
+    assert runner._policy(spec, cfg) is first
+    shutil.copy(runs["sr2"] / "model.zip", run / "model.zip")  # "retrained" into the folder
+    os.utime(run / "model.zip", ns=(time.time_ns(), time.time_ns() + 10**9))
+    second = runner._policy(spec, cfg)
+    assert second is not first
+    w1, w2 = first.model.policy.state_dict(), second.model.policy.state_dict()
+    assert not all(torch.equal(w1[k], w2[k]) for k in w1)
+
+
+# -- every setting reachable, quiet output --------------------------------------------------
+def test_physics_section_round_trips_and_is_validated(tmp_path):
+    cfg = RunConfig.from_dict({"physics": {"wind_mean": [0, 2, 0], "cell_size_m": 2.0}})
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg.to_dict()))
+    again = RunConfig.from_yaml(path)
+    assert again == cfg and again.physics.wind_mean == (0.0, 2.0, 0.0)
+    with pytest.raises(ConfigError, match="unknown setting 'wind' in section 'physics'"):
+        RunConfig.from_dict({"physics": {"wind": 1}})
+    with pytest.raises(ConfigError, match="physics.cell_size_m"):
+        RunConfig.from_dict({"physics": {"cell_size_m": 0}})
+    with pytest.raises(ConfigError, match="physics.stabilized_gimbal"):
+        RunConfig.from_dict({"physics": {"stabilized_gimbal": "yes"}})
+    plan = EvalPlan(
+        specs=[runner.spec_for_builtin("boustrophedon")],
+        sizes=[(16, 16, 3)],
+        episodes=1,
+        config=replace(cfg, env=cfg.env),
+    )
+    evaluate(plan, tmp_path / "ev")
+    assert json.loads((tmp_path / "ev" / "plan.json").read_text())["physics"]["cell_size_m"] == 2
+
+
+def test_progress_prints_one_line_per_interval_and_one_final_line(capsys):
+    progress = Progress(100, "ppo-sr", every_s=3600)
+    for steps in range(4, 200, 4):  # the vector steps of the last rollout run past the total
+        progress.update(steps, 0.5, None)
+    progress.close()
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("[ppo-sr] 196/100 steps")
+
+
+def test_small_cli_outputs(tmp_path):
+    from pirl.advice.parser import parse_recommendation
+    from pirl.advice.recommendation import FORMAT_EXAMPLE
+    from pirl.cli import _copies_format_example, _mean_ci
+
+    assert _mean_ci(0.5, float("nan")) == "0.500"
+    assert _mean_ci(0.5, 0.1) == "0.500 ± 0.100"
+    example = parse_recommendation(FORMAT_EXAMPLE)
+    prompt = f"Reply with one line in exactly this format: {FORMAT_EXAMPLE}"
+    assert _copies_format_example(example, prompt)
+    assert not _copies_format_example(parse_recommendation(FORMAT_EXAMPLE.replace("75", "30")),
+                                      prompt)  # fmt: skip
+    proc = _pirl("evaluate", "--help", cwd=tmp_path, env={**os.environ, "COLUMNS": "200"})
+    assert "pirl[distributed]" in proc.stdout
