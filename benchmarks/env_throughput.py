@@ -1,73 +1,128 @@
-"""Environment throughput: agent-steps per second with random actions.
+"""Environment throughput: agent-steps per second with random actions, batched against naive.
 
-Compares a single ``VCPPEnv`` stepped in a Python loop with ``make_vec_env(64)`` on 15x15x3
-and 60x60x3, both footprint models, and prints the batched/single ratio measured in the same
-run. Usage: ``python benchmarks/env_throughput.py [--seconds 3] [--envs 64]``.
+All rows are measured in the same run, on the same machine, so their ratios are meaningful
+even where the absolute numbers are noisy (a shared machine):
+
+- ``naive``: one world, the same rule code run as plain Python over numpy arrays (numba's JIT
+  disabled, in a subprocess), stepped in a Python loop: what the env would be without the
+  compiled kernels.
+- ``single``: one compiled ``VCPPEnv`` stepped in a Python loop (the Gymnasium API per step).
+- ``SyncVectorEnv``: Gymnasium's Python loop over single envs, what ``make_vec`` gave before
+  the vector entry point.
+- ``VCPPVectorEnv``: ``gym.make_vec("pirl/VCPP-v0", num_envs=N)``, the Gymnasium vector env.
+- ``VCPPVecEnv``: ``make_vec_env(N)``, the Stable-Baselines3 adapter (per-world info dicts).
+- ``EnvCore``: the batched core alone (one kernel call per step, no API around it).
+
+Usage: ``python benchmarks/env_throughput.py [--seconds 2] [--envs 64] [--size 60x60x3]
+[--footprint paper] [--threads]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
 import time
+from collections.abc import Callable
 
+import gymnasium as gym
 import numpy as np
 
-from pirl.env import VCPPEnv, make_vec_env
+import pirl  # noqa: F401  (registers pirl/VCPP-v0)
+from pirl.env import VCPPEnv, VCPPVectorEnv, make_vec_env
+from pirl.env.core import EnvCore
+from pirl.world.config import VCPPConfig
 
 
-def single_rate(size: tuple[int, int, int], footprint: str, seconds: float) -> float:
-    env = VCPPEnv(size=size, footprint=footprint)
-    rng = np.random.default_rng(0)
+def rate(step: Callable[[int], object], per_call: int, seconds: float) -> float:
+    """Agent-steps per second of ``step(k)`` (k counts calls), best of three slices."""
+    step(0)  # compile and warm up outside the timed loop
+    best, calls = 0.0, 1
+    for _ in range(3):
+        n, start = 0, time.perf_counter()
+        while (elapsed := time.perf_counter() - start) < seconds / 3:
+            for _ in range(20):
+                step(calls)
+                calls += 1
+            n += 20
+        best = max(best, n * per_call / elapsed)
+    return best
+
+
+def single_rate(settings: dict, seconds: float) -> float:
+    env = VCPPEnv(**settings)
     env.reset(seed=0)
-    env.step(0)  # compile outside the timed loop
-    actions = rng.integers(0, 12, 100_000).tolist()
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        for a in actions[steps % 90_000 : steps % 90_000 + 1000]:
-            _, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:
-                env.reset()
-        steps += 1000
-    return steps / (time.perf_counter() - start)
+    actions = np.random.default_rng(0).integers(0, 12, 4096).tolist()
+
+    def step(k: int) -> None:
+        _, _, terminated, truncated, _ = env.step(actions[k % 4096])
+        if terminated or truncated:
+            env.reset()
+
+    return rate(step, 1, seconds)
 
 
-def vec_rate(
-    size: tuple[int, int, int], footprint: str, envs: int, seconds: float, parallel: bool
-) -> float:
-    venv = make_vec_env(envs, seed=0, size=size, footprint=footprint, parallel=parallel)
-    venv.reset()
-    rng = np.random.default_rng(0)
-    actions = rng.integers(0, 12, (1000, envs))
-    venv.step(actions[0])  # compile outside the timed loop
-    batches, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        for k in range(100):
-            venv.step(actions[(batches + k) % 1000])
-        batches += 100
-    return batches * envs / (time.perf_counter() - start)
+def batched_rate(env_step: Callable[[np.ndarray], object], envs: int, seconds: float) -> float:
+    actions = np.random.default_rng(0).integers(0, 12, (256, envs))
+    return rate(lambda k: env_step(actions[k % 256]), envs, seconds)
+
+
+def naive_rate(settings: dict, seconds: float) -> float:
+    """The single env with numba's JIT off, measured in a child process (the flag is global)."""
+    code = (
+        "import json, sys; sys.path.insert(0, 'benchmarks');"
+        "from env_throughput import single_rate;"
+        f"print(single_rate(json.loads(sys.argv[1]), {seconds}))"
+    )
+    import json
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONWARNINGS="ignore")
+    out = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(settings)],
+        capture_output=True, text=True, env=env, cwd=root, check=True,
+    )  # fmt: skip
+    return float(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=3.0, help="timing per cell of the table")
-    parser.add_argument("--envs", type=int, default=64, help="worlds in the batched env")
+    parser.add_argument("--seconds", type=float, default=2.0, help="timing per row")
+    parser.add_argument("--envs", type=int, default=64, help="worlds in the batched envs")
+    parser.add_argument("--size", default="60x60x3")
+    parser.add_argument("--footprint", default="paper", choices=("paper", "frustum"))
+    parser.add_argument("--threads", action="store_true", help="also numba threads (parallel)")
     args = parser.parse_args()
-    print(f"agent-steps/s, random actions, {args.seconds:.0f} s per measurement")
-    head = f"vec{args.envs}"
-    print(
-        f"{'size':>9} {'footprint':>9} {'single':>10} {head + ' 1 thread':>16} {'ratio':>6}"
-        f" {head + ' threads':>16} {'ratio':>6}"
-    )
-    for size in ((15, 15, 3), (60, 60, 3)):
-        for footprint in ("paper", "frustum"):
-            single = single_rate(size, footprint, args.seconds)
-            serial = vec_rate(size, footprint, args.envs, args.seconds, parallel=False)
-            threaded = vec_rate(size, footprint, args.envs, args.seconds, parallel=True)
-            name = "x".join(map(str, size))
-            print(
-                f"{name:>9} {footprint:>9} {single:>10,.0f} {serial:>16,.0f}"
-                f" {serial / single:>6.1f} {threaded:>16,.0f} {threaded / single:>6.1f}"
-            )
+    size = tuple(int(v) for v in args.size.split("x"))
+    settings = {"size": list(size), "footprint": args.footprint}
+    cfg = VCPPConfig(size=size, footprint=args.footprint)
+    n = args.envs
+
+    rows: list[tuple[str, float]] = [("naive (numba off)", naive_rate(settings, args.seconds))]
+    rows.append(("single VCPPEnv", single_rate(settings, args.seconds)))
+    sync = gym.make_vec("pirl/VCPP-v0", num_envs=8, vectorization_mode="sync", **settings)
+    sync.reset(seed=0)
+    rows.append(("SyncVectorEnv(8)", batched_rate(sync.step, 8, args.seconds)))
+    for parallel in (False, True) if args.threads else (False,):
+        tag = ", threads" if parallel else ""
+        vector = VCPPVectorEnv(n, cfg, parallel=parallel)
+        vector.reset(seed=0)
+        rows.append((f"VCPPVectorEnv({n}{tag})", batched_rate(vector.step, n, args.seconds)))
+        sb3 = make_vec_env(n, 0, cfg, parallel=parallel)
+        sb3.reset()
+        rows.append((f"VCPPVecEnv({n}{tag}, SB3)", batched_rate(sb3.step, n, args.seconds)))
+        core = EnvCore(cfg, n, parallel)
+        for e in range(n):
+            core.reset_world(e, np.random.default_rng(e))
+        rows.append((f"EnvCore({n}{tag})", batched_rate(core.step, n, args.seconds)))
+
+    naive, single = rows[0][1], rows[1][1]
+    print(f"{args.size} {args.footprint}, random actions, agent-steps/s (best third of "
+          f"{args.seconds:g} s per row)")  # fmt: skip
+    print(f"{'env':<28} {'steps/s':>12} {'x naive':>8} {'x single':>9}")
+    for name, value in rows:
+        print(f"{name:<28} {value:>12,.0f} {value / naive:>8.1f} {value / single:>9.1f}")
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from pirl.env.observation import _observation, build_observations, obs_size
 from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
 from pirl.world.config import REWARD_TERMS, VCPPConfig
-from pirl.world.dynamics import PI_STEP_LIMIT, step_one
+from pirl.world.dynamics import F_TERMINATED, F_TRUNCATED, N_ACTIONS, PI_STEP_LIMIT, step_one
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch
 
@@ -27,7 +27,9 @@ def _make_step_kernel(parallel: bool):
     """A kernel that steps every world, weighs its reward terms and builds its observation.
 
     One fused loop (one thread launch, data still in cache) over the rules defined once in
-    :func:`pirl.world.dynamics.step_one` and :func:`pirl.env.observation._observation`.
+    :func:`pirl.world.dynamics.step_one` and :func:`pirl.env.observation._observation`, which
+    numba inlines into it. Returns how many worlds ended, or -1 (nothing stepped) when an
+    action lies outside [0, N_ACTIONS).
     """
     loop = numba.prange if parallel else range
 
@@ -37,6 +39,10 @@ def _make_step_kernel(parallel: bool):
         blk_total, bx, by, obstacles, pf, pi, buf, terms, flags, weights, rewards, capacity,
         window, obs,
     ):  # fmt: skip
+        for e in range(actions.shape[0]):
+            if actions[e] < 0 or actions[e] >= N_ACTIONS:
+                return -1
+        ended = 0
         for e in loop(actions.shape[0]):
             step_one(
                 e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits,
@@ -50,6 +56,8 @@ def _make_step_kernel(parallel: bool):
                 e, ints, energy, capacity, pi[PI_STEP_LIMIT], blocked, coverable, views,
                 blk_todo, blk_total, window, obs,
             )  # fmt: skip
+            ended += flags[e, F_TERMINATED] | flags[e, F_TRUNCATED]
+        return ended
 
     return kernel
 
@@ -69,6 +77,7 @@ class EnvCore:
         self.rewards = np.zeros(num, dtype=np.float64)
         self.obs = np.zeros((num, obs_size(cfg.obs_window, cfg.obs_global)), dtype=np.float32)
         self._all = np.arange(num, dtype=np.int64)
+        self.ended = -1  # worlds ended on the last step; -1 = unknown (read the flags)
 
     def reset_world(
         self, e: int, rng: np.random.Generator, scenario: Scenario | None = None
@@ -80,21 +89,27 @@ class EnvCore:
             self.world.load_scenario(e, scenario)
         self.weights[e] = draw_weights(self.cfg, rng)
         self.rewards[e] = 0.0
+        self.ended = -1  # other worlds may still hold an ended step: look at the flags
         self._observe(np.array([e], dtype=np.int64))
 
-    def step(self, actions: np.ndarray) -> None:
-        """One action per world; afterwards read ``obs``, ``rewards`` and ``world.flags``."""
+    def step(self, actions: np.ndarray) -> int:
+        """One action per world; afterwards read ``obs``, ``rewards`` and ``world.flags``.
+
+        Returns how many worlds' episodes ended on this step.
+        """
         actions = np.asarray(actions, dtype=np.int64).reshape(self.num)
-        if actions.min() < 0 or actions.max() >= D.N_ACTIONS:
-            raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
         w = self.world
         kernel = _step_parallel if w.parallel else _step_serial
-        kernel(
+        ended = kernel(
             actions, w.ints, w.energy, w.rng, w.blocked, w.coverable, w.views, w.redmask,
             w.visits, w.blk_todo, w.blk_total, w.bx, w.by, w.obstacles, w.pf, w.pi, w.buf,
             w.terms, w.flags, self.weights, self.rewards, w.capacity, self.cfg.obs_window,
             self.obs,
         )  # fmt: skip
+        if ended < 0:
+            raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
+        self.ended = ended
+        return ended
 
     def _observe(self, worlds: np.ndarray) -> None:
         w = self.world
@@ -115,8 +130,10 @@ class EnvCore:
         """Copies of what every world's info is made of, as of the last step or reset (with
         the episode metrics of the worlds whose episode just ended)."""
         w = self.world
-        done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
-        metrics = {int(e): episode_metrics(w, int(e)) for e in done}
+        metrics = {}
+        if self.ended:  # most steps end no episode: skip the search
+            done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
+            metrics = {int(e): episode_metrics(w, int(e)) for e in done}
         return InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
 
     def infos(self, worlds: list[int] | None = None, lazy: bool = False) -> list[dict[str, Any]]:

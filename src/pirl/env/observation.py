@@ -31,7 +31,7 @@ def obs_size(window: int, global_side: int) -> int:
     return 2 * window * window + global_side * global_side + N_SCALARS
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _observation(
     e, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
     window, out,

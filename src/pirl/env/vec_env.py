@@ -70,7 +70,7 @@ class VCPPVecEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
         core = self.core
-        core.step(self._actions)
+        n_ended = core.step(self._actions)
         self._actions = None
         terminated, truncated = core.terminated, core.truncated
         dones = terminated | truncated
@@ -79,8 +79,8 @@ class VCPPVecEnv(VecEnv):
         # The step's info snapshot, for wrappers that add terms (PARE writes the LLM term).
         self.step_snapshot = core.snapshot
         obs = core.obs.copy()
-        ended = np.flatnonzero(dones)
-        if ended.size:
+        ended = np.flatnonzero(dones) if n_ended else ()
+        if len(ended):
             for e in ended:
                 infos[e]["terminal_observation"] = obs[e].copy()
                 infos[e]["TimeLimit.truncated"] = bool(truncated[e] and not terminated[e])

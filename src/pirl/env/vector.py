@@ -77,8 +77,7 @@ class VCPPVectorEnv(VectorEnv):
         self._rngs = [seeding.np_random(None)[0] for _ in range(num_envs)]
         # Worlds whose episode ended on the last step: the next step resets them.
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
-        self._terminated = np.zeros(num_envs, dtype=np.bool_)
-        self._truncated = np.zeros(num_envs, dtype=np.bool_)
+        self._n_autoreset = 0
         self._paths: list[list[tuple[int, int, int]]] = [[] for _ in range(num_envs)]
 
     @property
@@ -113,8 +112,7 @@ class VCPPVectorEnv(VectorEnv):
             self.core.reset_world(int(e), self._rngs[e])
             self._paths[e] = [self.world.position(int(e))]
         self._autoreset[mask] = False
-        self._terminated[mask] = False
-        self._truncated[mask] = False
+        self._n_autoreset = int(self._autoreset.sum())
         infos = self.core.infos_snapshot()
         return self._obs(), LazyVectorInfo(infos)
 
@@ -123,29 +121,26 @@ class VCPPVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One action per world; (observations, rewards, terminated, truncated, info)."""
         core = self.core
-        core.step(actions)
-        # Worlds that ended last step were stepped past their end above (cheaper than a masked
-        # kernel, and their state is about to be replaced): reset them now, which also zeroes
-        # their reward and flags, as NEXT_STEP wants.
-        if self._autoreset.any():
+        ended = core.step(actions)
+        if self._n_autoreset:
+            # These worlds ended last step and were just stepped past their end (cheaper than
+            # a masked kernel; their state is replaced now): reset them, which also zeroes
+            # their reward and flags, as NEXT_STEP wants.
             for e in np.flatnonzero(self._autoreset):
                 core.reset_world(int(e), self._rngs[e])
                 self._paths[e] = []
+            ended = -1  # the count included them: read the flags
         flags = core.world.flags
-        np.not_equal(flags[:, D.F_TERMINATED], 0, out=self._terminated)
-        np.not_equal(flags[:, D.F_TRUNCATED], 0, out=self._truncated)
-        np.logical_or(self._terminated, self._truncated, out=self._autoreset)
+        terminated = flags[:, D.F_TERMINATED] != 0
+        truncated = flags[:, D.F_TRUNCATED] != 0
+        if ended:
+            np.logical_or(terminated, truncated, out=self._autoreset)
+            self._n_autoreset = int(self._autoreset.sum())
         if self.render_mode is not None:
             for e in range(self.num_envs):
                 self._paths[e].append(self.world.position(e))
         info = LazyVectorInfo(core.infos_snapshot())
-        return (
-            self._obs(),
-            core.rewards.copy(),
-            self._terminated.copy(),
-            self._truncated.copy(),
-            info,
-        )
+        return self._obs(), core.rewards.copy(), terminated, truncated, info
 
     def _obs(self) -> np.ndarray:
         return self.core.obs.copy() if self.copy else self.core.obs

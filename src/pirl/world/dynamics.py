@@ -69,7 +69,7 @@ def _free(blocked, e, x, y, z, sx, sy, sz):
     return 0 <= x < sx and 0 <= y < sy and 0 <= z < sz and not blocked[e, x, y, z]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def book_view(e, cells, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant):
     """Book one view of world e (the first ``n`` distinct rows (i, j) of ``cells``).
 
@@ -103,7 +103,7 @@ def book_view(e, cells, n, ints, coverable, views, redmask, blk_todo, bx, by, ma
     return new
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def observe(
     e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf, mark_redundant
 ):
@@ -117,7 +117,7 @@ def observe(
     return book_view(e, buf, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def camera_action(e, a, ints):
     """Apply camera action ``a`` (6-11) to world e: steps of 5 degrees, 15 degrees and 0.1
     zoom; at a limit the setting holds. Counts the camera action."""
@@ -136,7 +136,7 @@ def camera_action(e, a, ints):
         ints[e, ZOOM] = max(5, ints[e, ZOOM] - 1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def visit(e, ints, visits):
     """Count a visit to world e's current cell; return its curiosity term 1/sqrt(visits)."""
     x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
@@ -144,7 +144,7 @@ def visit(e, ints, visits):
     return 1.0 / np.sqrt(visits[e, x, y, z])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def close_step(
     e, ints, energy, pf, pi, terms, flags, used, new, moved, cam_changed, collision, wind,
     curiosity,
@@ -184,7 +184,7 @@ def close_step(
     flags[e, F_NEW] = new
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def step_one(
     e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
     obstacles, pf, pi, buf, terms, flags,
