@@ -82,6 +82,14 @@ def test_openai_without_key_is_one_line_and_makes_no_folder(tmp_path):
     )  # fmt: skip
     _one_clean_line(proc, "OPENAI_API_KEY")
     assert not out.exists()
+    # reproduce takes its advisor from the preset unless --advisor says otherwise
+    preset = tmp_path / "openai.yaml"
+    data = yaml.safe_load(TEST_CFG.read_text())
+    data["pare"]["advisor"] = "openai"
+    preset.write_text(yaml.safe_dump(data))
+    proc = _pirl("reproduce", "--config", str(preset), "--out", str(out), cwd=tmp_path, env=env)
+    _one_clean_line(proc, "OPENAI_API_KEY")
+    assert not out.exists()
 
 
 def test_damaged_or_missing_model_files_are_named(runs, tmp_path):
@@ -342,3 +350,9 @@ def test_small_cli_outputs(tmp_path):
                                       prompt)  # fmt: skip
     proc = _pirl("evaluate", "--help", cwd=tmp_path, env={**os.environ, "COLUMNS": "200"})
     assert "pirl[distributed]" in proc.stdout
+    proc = _pirl("evaluate", "--methods", "boustrophedon", "--sizes", "16", "--episodes", "1",
+                 "--out", str(tmp_path / "ev"), cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "episodes: 1/1 episodes" in proc.stdout  # progress off a terminal
+    assert "nan" not in proc.stdout and "1.000" in proc.stdout
+    assert proc.stderr.strip() == ""  # no third-party noise

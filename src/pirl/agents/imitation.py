@@ -66,6 +66,9 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     """Collect expert data, fit TabNet, save it in run folder ``out``; returns the model file."""
     from pytorch_tabnet.tab_model import TabNetClassifier
 
+    from pirl import _quiet
+
+    _quiet.install()  # TabNet's "Device used" and "Best weights" warnings
     out, expert = Path(out), Path(expert)
     if resume and (out / TABNET_FILE).is_file():
         return out / TABNET_FILE
