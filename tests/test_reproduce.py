@@ -42,7 +42,10 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
     }  # fmt: skip
     table = (report.parent / "table.md").read_text()
     assert "Table 1: grid simulator" in table
-    assert "PIRL (oracle advisor, not an LLM)" in table
+    # Rows carry each run's full label (meta.json's, when the run records one).
+    meta = json.loads((out / "runs" / "pirl-oracle-s0" / "meta.json").read_text())
+    label = meta.get("label") or "PIRL (oracle advisor, not an LLM)"
+    assert label in table and "not an LLM" in label
     assert "LLM-only (oracle, not an LLM)" in table
     assert "(0.64)" not in table  # sizes without a paper column carry no paper numbers
     for name in ("figure.png", "learning_curves.png"):
