@@ -18,10 +18,12 @@ from pirl.advice.base import Advisor
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.state import advice_requests
 from pirl.agents.policy import Policy, hold_action
+from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
-_TILT_UP, _TILT_DOWN, _PAN_UP, _PAN_DOWN, _ZOOM_IN, _ZOOM_OUT = 6, 7, 8, 9, 10, 11
+# For each axis x, y, z: the action that moves along it in the + and in the - direction.
+_MOVE_ACTIONS = ((D.X_PLUS, D.X_MINUS), (D.Y_PLUS, D.Y_MINUS), (D.Z_PLUS, D.Z_MINUS))
 
 
 def _snap(value: float, step: float, low: float, high: float) -> float:
@@ -35,12 +37,12 @@ def action_queue(camera: tuple[int, int, int], rec: Recommendation) -> list[int]
     want_pan = int(_snap(rec.pan, 15, -90, 90))
     want_zoom = round(_snap(rec.zoom * 10, 1, 5, 20))
     queue: list[int] = []
-    queue += [_TILT_UP if want_tilt > tilt else _TILT_DOWN] * (abs(want_tilt - tilt) // 5)
-    queue += [_PAN_UP if want_pan > pan else _PAN_DOWN] * (abs(want_pan - pan) // 15)
-    queue += [_ZOOM_IN if want_zoom > zoom10 else _ZOOM_OUT] * abs(want_zoom - zoom10)
+    queue += [D.TILT_PLUS if want_tilt > tilt else D.TILT_MINUS] * (abs(want_tilt - tilt) // 5)
+    queue += [D.PAN_PLUS if want_pan > pan else D.PAN_MINUS] * (abs(want_pan - pan) // 15)
+    queue += [D.ZOOM_PLUS if want_zoom > zoom10 else D.ZOOM_MINUS] * abs(want_zoom - zoom10)
     for axis, delta in enumerate((rec.dx, rec.dy, rec.dz)):
         if delta:
-            queue.append(2 * axis + (0 if delta > 0 else 1))
+            queue.append(_MOVE_ACTIONS[axis][0 if delta > 0 else 1])
     return queue
 
 

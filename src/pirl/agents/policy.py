@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
 
@@ -26,7 +27,7 @@ class Policy(ABC):
 
     @abstractmethod
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        """The action (0-11) for this step."""
+        """The action (0 to N_ACTIONS - 1, see :mod:`pirl.world.dynamics`) for this step."""
 
 
 class RandomPolicy(Policy):
@@ -43,7 +44,7 @@ class RandomPolicy(Policy):
             self._rng = np.random.default_rng(seed)
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        return int(self._rng.integers(12))
+        return int(self._rng.integers(D.N_ACTIONS))
 
 
 def hold_action(camera: tuple[int, int, int]) -> int:
@@ -54,9 +55,9 @@ def hold_action(camera: tuple[int, int, int]) -> int:
     """
     tilt, pan, zoom10 = camera
     for at_limit, action in (
-        (tilt == 90, 6), (tilt == 0, 7), (pan == 90, 8), (pan == -90, 9), (zoom10 == 20, 10),
-        (zoom10 == 5, 11),
+        (tilt == 90, D.TILT_PLUS), (tilt == 0, D.TILT_MINUS), (pan == 90, D.PAN_PLUS),
+        (pan == -90, D.PAN_MINUS), (zoom10 == 20, D.ZOOM_PLUS), (zoom10 == 5, D.ZOOM_MINUS),
     ):  # fmt: skip
         if at_limit:
             return action
-    return 6
+    return D.TILT_PLUS
