@@ -193,17 +193,3 @@ def test_oracle_advice_points_to_uncovered_ground():
     # first below 80, zoom 1.8 the first with floor(2 * zoom + 0.5) = 4.
     assert (rec.tilt, rec.zoom) == (75, 1.8)
     assert abs(rec.dx) + abs(rec.dy) + abs(rec.dz) == 1
-
-
-def test_async_keeps_advice_slower_than_an_episode():
-    settings = dict(SETTINGS, max_steps=4, scale_by_alpha=False)
-    pare = PAREVecEnv(make_vec_env(2, seed=7, **settings), SlowOracle(0.2), mode="async")
-    steps = _rollout(pare, 40, pause=0.02)
-    late = [infos[0]["pare"]["status"] for _, _, _, infos in steps[20:]]
-    assert "stale" in late  # advice asked in an earlier 4-step episode still shapes
-    assert pare.stats.answers_cross_episode > 0
-    assert pare.stats.as_dict()["mean_staleness"] >= 4
-    pare.close()
-    sync = PAREVecEnv(make_vec_env(2, seed=7, **settings), OracleAdvisor(), query_every=8)
-    for _, _, _, infos in _rollout(sync, 12):
-        assert infos[0]["pare"]["staleness"] < 4  # sync never carries advice across episodes

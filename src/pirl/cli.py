@@ -218,10 +218,14 @@ def train(
     ] = None,
     expert: Annotated[Path | None, typer.Option(help="il: a finished ppo-ewri run.")] = None,
     resume: Annotated[bool, typer.Option(help="Continue the run in --out.")] = False,
+    student: Annotated[
+        Path | None,
+        typer.Option(help="pirl, student mode: start from a student made by pirl distill."),
+    ] = None,
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
     from pirl.agents.config import RunConfig
-    from pirl.agents.train import TrainingInterrupted
+    from pirl.agents.train import TrainingInterrupted, TrainingStopped
     from pirl.agents.train import train as run_training
 
     own = out / "config.yaml"
@@ -245,11 +249,66 @@ def train(
                 raise ConfigError("--method il needs --expert runs/<a finished ppo-ewri run>")
             result = train_il(cfg, expert, out, seed=seed, resume=resume)
         else:
-            result = run_training(method, cfg, out, seed=seed, resume=resume)
+            if student is not None and (method != "pirl" or cfg.pare.mode != "student"):
+                raise ConfigError("--student needs --method pirl with pare.mode student")
+            result = run_training(
+                method, cfg, out, seed=seed, resume=resume, student=student if not resume else None
+            )
     except TrainingInterrupted as stop:
         err.print(f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume")
         raise typer.Exit(130) from None
+    except TrainingStopped as stop:
+        err.print(
+            f"[bold red]stopped:[/] {escape(stop.reason)}; checkpoint: {stop.checkpoint}; "
+            "fix the advisor, then continue with --resume"
+        )
+        raise typer.Exit(3) from None
     console.print(f"done: {result}")
+
+
+@app.command()
+@_clean_errors
+def distill(
+    teacher: Annotated[str, typer.Option(help="The advisor to imitate: local, openai, oracle.")],
+    out: Annotated[Path, typer.Option(help="Student folder to create, e.g. students/NAME.")],
+    states: Annotated[int, typer.Option(help="States to ask the teacher about.")] = 2000,
+    config: Annotated[
+        str, typer.Option(help="Preset name or YAML file (env, pare and advisor settings).")
+    ] = "quick",
+    policy: Annotated[
+        list[str] | None,
+        typer.Option(help="Where states come from: boustrophedon, random or a run folder."),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the state sampling.")] = 0,
+    fit_steps: Annotated[int, typer.Option(help="Adam steps of the student's fit.")] = 2000,
+) -> None:
+    """Distil a teacher advisor into a student offline (for pirl train --student)."""
+    from rich.progress import Progress
+
+    from pirl.agents.config import RunConfig
+    from pirl.agents.distill import distill as run_distill
+
+    cfg = RunConfig.from_yaml(_preset(config, "--config"))
+    if teacher == "openai":
+        _check_openai_key(cfg, teacher)
+    with Progress(console=console, transient=True) as bar:
+        task = bar.add_task("teacher answers", total=states)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+            if not console.is_terminal and (done == total or done % 500 < 32):
+                console.print(f"distill: {done}/{total} answers")
+
+        record = run_distill(
+            cfg, teacher, states, out, _split_words(policy or ["boustrophedon", "random"]),
+            seed=seed, fit_steps=fit_steps, progress=progress,
+        )  # fmt: skip
+    console.print(
+        f"{record['label']}: agreement {record['agreement']:.3f} (majority "
+        f"{record['majority']:.3f}) on {record['heldout']} held-out answers; "
+        f"{record['dataset_size']} answers in the dataset"
+    )
+    console.print(f"wrote {out / 'student.pt'}; train with --student {out}")
 
 
 def _run_seed(out: Path) -> int:

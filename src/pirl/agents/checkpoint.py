@@ -14,7 +14,6 @@ import os
 import pickle
 import random
 import shutil
-from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -28,10 +27,6 @@ from pirl.env.vec_env import VCPPVecEnv
 _WORLD_ARRAYS = (
     "ints", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
     "blk_total", "obstacles", "terms", "flags",
-)  # fmt: skip
-_PARE_ARRAYS = (
-    "_rec", "_has_rec", "_rec_step", "_rec_cached", "_episode", "_episode_step", "_want", "_p_t",
-    "_counts",
 )  # fmt: skip
 
 
@@ -58,17 +53,7 @@ def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None)
         "python_rng": random.getstate(),
     }
     if pare is not None:
-        job = pare._job
-        pending = None
-        if job is not None and pare.mode == "sync":
-            # Sync mode waits for these answers anyway; keeping them makes a resume exact.
-            pending = (job.worlds, job.episodes, job.step, job.future.result())
-        state["pare"] = {
-            "arrays": {name: getattr(pare, name).copy() for name in _PARE_ARRAYS},
-            "t": pare._t,
-            "stats": copy.deepcopy(pare.stats),
-            "pending": pending,
-        }
+        state["pare"] = pare.state_dict()
     return state
 
 
@@ -76,8 +61,6 @@ def restore(
     state: dict, model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None
 ) -> None:
     """Put a captured state back into a freshly built model and environment stack."""
-    from pirl.pare.wrapper import _Job
-
     model.policy.load_state_dict(state["policy"])
     model.policy.optimizer.load_state_dict(state["optimizer"])
     model.num_timesteps = state["num_timesteps"]
@@ -93,17 +76,7 @@ def restore(
     monitor.episode_lengths = state["monitor"]["episode_lengths"].copy()
     monitor.episode_count = state["monitor"]["episode_count"]
     if pare is not None and "pare" in state:
-        saved = state["pare"]
-        for name, value in saved["arrays"].items():
-            getattr(pare, name)[...] = value
-        pare._t = saved["t"]
-        pare.stats = copy.deepcopy(saved["stats"])
-        pare._job = None
-        if saved["pending"] is not None:
-            worlds, episodes, step, answers = saved["pending"]
-            future: Future = Future()
-            future.set_result(answers)
-            pare._job = _Job(worlds, episodes, step, future)
+        pare.load_state_dict(state["pare"])
     torch.set_rng_state(state["torch_rng"])
     np.random.set_state(state["numpy_rng"])
     random.setstate(state["python_rng"])

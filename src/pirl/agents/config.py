@@ -71,8 +71,10 @@ class PareSettings:
 
     advisor: str = "local"
     """'local' (embedded model), 'openai' (any OpenAI-compatible server) or 'oracle'."""
-    mode: str = "async"
-    """'sync' (the paper's timing) or 'async' (never waits for the LLM)."""
+    mode: str = "student"
+    """'student' (a distilled advisor answers every step; the teacher is asked at
+    teacher_rate), 'sync' (the paper's timing: the answer about s_t shapes r_{t+1}) or 'async'
+    (never waits; answers about an ended episode are dropped)."""
     query_every: int = 1
     """K: ask every K steps of each world."""
     lam_cam: float = 1.0
@@ -93,6 +95,26 @@ class PareSettings:
     """Stop asking after this many tokens (0 = no limit)."""
     prompt_variant: str = "paper"
     """Prompt variant of pirl.advice.build_prompt."""
+    teacher_rate: float = 0.002
+    """Student mode: teacher calls per env-step for an LLM teacher (paper: 1.0 at K = 1)."""
+    oracle_teacher_rate: float = 0.02
+    """Student mode: teacher calls per env-step when the teacher is the oracle (cheap)."""
+    student_gate: float = 0.8
+    """Student mode: held-out agreement with the teacher before the student shapes rewards."""
+    student_fit_steps: int = 100
+    """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
+    student_hidden: int = 128
+    """Student mode: width of the student's two hidden layers."""
+    student_dataset: str = ""
+    """Teacher answers with their states; empty = student.sqlite beside the answer cache."""
+    student_wait_teacher: bool = False
+    """Student mode: wait for the teacher's batch at each rollout boundary (reproducible runs;
+    PPO then waits for a slow teacher)."""
+    max_failure_rate: float = 0.5
+    """Stop training when more than this share of the last failure_window teacher answers
+    failed or did not parse (0 = never stop)."""
+    failure_window: int = 200
+    """Teacher answers in the rolling failure rate."""
 
 
 @dataclass(frozen=True)
@@ -252,7 +274,9 @@ def _validate(cfg: RunConfig) -> None:
         "ppo.n_epochs": p.n_epochs, "ppo.learning_rate": p.learning_rate,
         "ppo.torch_threads": p.torch_threads, "train.total_steps": t.total_steps,
         "train.checkpoint_every": t.checkpoint_every, "pare.query_every": pare.query_every,
-        "pare.timeout_s": pare.timeout_s, "il.expert_steps": cfg.il.expert_steps,
+        "pare.timeout_s": pare.timeout_s, "pare.student_fit_steps": pare.student_fit_steps,
+        "pare.student_hidden": pare.student_hidden, "pare.failure_window": pare.failure_window,
+        "il.expert_steps": cfg.il.expert_steps,
         "il.max_epochs": cfg.il.max_epochs, "il.batch_size": cfg.il.batch_size,
         "reproduce.episodes": cfg.reproduce.episodes,
         "reproduce.llm_only_episodes": cfg.reproduce.llm_only_episodes,
@@ -266,12 +290,20 @@ def _validate(cfg: RunConfig) -> None:
         "ppo.lr_schedule": (p.lr_schedule, ("constant", "linear")),
         "ppo.device": (p.device, ("auto", "cpu", "cuda")),
         "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
-        "pare.mode": (pare.mode, ("sync", "async")),
+        "pare.mode": (pare.mode, ("student", "sync", "async")),
         "pare.prompt_variant": (pare.prompt_variant, ("paper", "compact")),
     }
     for key, (value, allowed) in choices.items():
         if value not in allowed:
             raise ConfigError(f"{key}={value!r}: allowed values are {', '.join(allowed)}")
+    for key, value in (
+        ("pare.teacher_rate", pare.teacher_rate),
+        ("pare.oracle_teacher_rate", pare.oracle_teacher_rate),
+        ("pare.student_gate", pare.student_gate),
+        ("pare.max_failure_rate", pare.max_failure_rate),
+    ):
+        if not 0 <= value <= 1:
+            raise ConfigError(f"{key}={value!r}: must be in [0, 1]")
     if not 0 < cfg.il.valid_fraction < 1:
         raise ConfigError(f"il.valid_fraction={cfg.il.valid_fraction!r}: must be in (0, 1)")
     if not all(isinstance(n, int) and n > 0 for n in p.net_arch):

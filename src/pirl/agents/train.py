@@ -33,7 +33,9 @@ from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
+from pirl.agents.loading import LABELS
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
+from pirl.pare.wrapper import AdvisorFailing
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 
 PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
@@ -204,8 +206,11 @@ class EnvStack:
     pare: Any | None
 
 
-def build_env_stack(method: str, cfg: RunConfig, seed: int, advisor: Any | None) -> EnvStack:
-    """make_vec_env -> (PARE for pirl) -> VecMonitor."""
+def build_env_stack(
+    method: str, cfg: RunConfig, seed: int, advice: Any | None, source: str = ""
+) -> EnvStack:
+    """make_vec_env -> (PARE for pirl, from a :class:`~pirl.agents.pirl_advice.PirlAdvice`)
+    -> VecMonitor."""
     venv = make_vec_env(
         cfg.ppo.n_envs, seed=train_seed_base(seed), config=env_config_for(method, cfg)
     )
@@ -214,13 +219,17 @@ def build_env_stack(method: str, cfg: RunConfig, seed: int, advisor: Any | None)
     if method == "pirl":
         from pirl.pare.wrapper import PAREVecEnv
 
-        if advisor is None:
+        if advice is None:
             raise ConfigError("pirl needs an advisor")
         p = cfg.pare
         pare = PAREVecEnv(
-            venv, advisor, query_every=p.query_every, mode=p.mode, lam_cam=p.lam_cam,
+            venv, advice.advisor, query_every=p.query_every, mode=p.mode, lam_cam=p.lam_cam,
             lam_move=p.lam_move, alpha=p.alpha, timeout_s=p.timeout_s,
-            prompt_variant=p.prompt_variant,
+            prompt_variant=p.prompt_variant, student=advice.student, dataset=advice.dataset,
+            teacher_rate=advice.teacher_rate, gate=p.student_gate, refit_every=cfg.ppo.n_steps,
+            fit_steps=p.student_fit_steps, wait_teacher=p.student_wait_teacher,
+            max_failure_rate=p.max_failure_rate, failure_window=p.failure_window,
+            label=advice.label, seed=seed, source=source,
         )  # fmt: skip
         inner = pare
     return EnvStack(VecMonitor(inner), venv, pare)
@@ -345,9 +354,17 @@ class RunCallback(BaseCallback):
     def recent_vcr(self) -> float | None:
         return float(np.mean(self._recent_vcr)) if self._recent_vcr else None
 
-    def advisor_calls(self) -> int | None:
+    def advisor_calls(self) -> str | None:
+        """Advice health for the progress line: answered and failed, not calls sent."""
         pare = self.stack.pare
-        return pare.stats.prompts_sent if pare is not None else None
+        if pare is None:
+            return None
+        st = pare.stats
+        failed = st.answers_failed + st.answers_unparseable
+        text = f"advisor answered {st.answers_ok:,} failed {failed:,}"
+        if pare.mode == "student":
+            text += f"  student agreement {st.student_agreement:.2f}"
+        return text
 
 
 def _truncate_csv(path: Path, rows: int) -> None:
@@ -391,7 +408,7 @@ class Progress:
             self._task = self._bar.add_task(label, total=total, info="")
             self._bar.start()
 
-    def update(self, steps: int, vcr: float | None, calls: int | None) -> None:
+    def update(self, steps: int, vcr: float | None, calls: str | None) -> None:
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -403,7 +420,7 @@ class Progress:
         if vcr is not None:
             info += f"  VCR(recent) {vcr:.2f}"
         if calls is not None:
-            info += f"  advisor calls {calls:,}"
+            info += f"  {calls}"
         self.steps, self.info = steps, info
         if self._bar is not None:
             self._bar.update(self._task, completed=min(steps, self.total), info=info)
@@ -431,11 +448,14 @@ def train(
     resume: bool = False,
     advisor: Any | None = None,
     show_progress: bool = True,
+    student: Path | None = None,
 ) -> Path:
     """Train ``method`` with ``cfg`` into run folder ``out``; returns the final model path.
 
-    ``advisor`` (pirl only) defaults to the one the config names. Interrupting with Ctrl-C
-    writes a checkpoint; ``resume=True`` continues from the latest one.
+    ``advisor`` (pirl only) defaults to the one the config names; it is probed before the run
+    folder exists. ``student`` (pirl, student mode): a distilled advisor to start from.
+    Interrupting with Ctrl-C writes a checkpoint; ``resume=True`` continues from the latest
+    one; an advisor that keeps failing stops the run the same way (:class:`TrainingStopped`).
     """
     from pirl import _quiet
 
@@ -457,25 +477,31 @@ def train(
             f"note: PPO trains whole rollouts of n_envs x n_steps = {rollout:,} steps, so "
             f"{cfg.train.total_steps:,} steps become {whole:,}"
         )
+    advice = None
+    if method == "pirl":
+        from pirl.agents.pirl_advice import build_pirl_advice
+
+        # Before the folder exists: a dead server or a wrong student leaves nothing behind.
+        advice = build_pirl_advice(cfg, advisor, student, probe=True, seed=seed)
+        advisor = advice.advisor
     found = prepare_run_folder(out, resume, log)
     ckpt = found[0] if found is not None else None
     torch.set_num_threads(cfg.ppo.torch_threads)
-    if method == "pirl" and advisor is None:
-        from pirl.advice.factory import make_advisor
-
-        advisor = make_advisor(cfg.pare.advisor, cfg)
     meta = {
         "method": method,
+        "label": advice.label if advice is not None else LABELS.get(method, method),
         "seed": seed,
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
         "complete": False,
         "total_steps": cfg.train.total_steps,
     }
+    if student is not None:
+        meta["student_from"] = str(student)
     if ckpt is None:
         (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
         write_json(out / "meta.json", meta)
-    stack = build_env_stack(method, cfg, seed, advisor)
+    stack = build_env_stack(method, cfg, seed, advice, source=str(out.resolve()))
     model = build_ppo(stack.env, cfg, seed, out / "tb")
     csv_rows = 0
     if found is not None:
@@ -499,6 +525,13 @@ def train(
         saved = callback.save_snapshot()
         stack.env.close()
         raise TrainingInterrupted(saved) from None
+    except AdvisorFailing as failing:
+        progress.close()
+        saved = callback.save_snapshot()
+        if stack.pare is not None:
+            write_json(out / "advisor_stats.json", _advisor_stats(stack.pare, advisor))
+        stack.env.close()
+        raise TrainingStopped(str(failing), saved) from None
     progress.close()
     final = out / "model.zip"
     tmp = out / "model.tmp.zip"
@@ -510,6 +543,15 @@ def train(
     write_json(out / "meta.json", meta)
     stack.env.close()
     return final
+
+
+class TrainingStopped(Exception):
+    """Training stopped for a reason the user must fix (an advisor that keeps failing);
+    ``checkpoint`` is the resumable state saved (or None)."""
+
+    def __init__(self, reason: str, saved: Path | None) -> None:
+        super().__init__(reason)
+        self.reason, self.checkpoint = reason, saved
 
 
 class TrainingInterrupted(Exception):

@@ -1,34 +1,44 @@
 """PARE during training: a VecEnv wrapper that adds ``w_llm * f_llm`` to every world's reward.
 
-Flow of one step (``mode="sync"``, the paper's timing):
+The advice about state ``s_t`` shapes the reward ``r_{t+1}``: after the action, the move
+``p_t -> p_{t+1}`` and the new camera are compared with the advice (DESIGN.md section 5).
+Three modes decide where that advice comes from; none of them ever passes one state's advice
+off as another's:
 
-1. After step t-1 the prompt for ``s_t`` of every world due a query is sent to the advisor in
-   a background thread, so the LLM's latency overlaps the policy's forward pass.
-2. ``step_async(a_t)`` remembers ``p_t``; ``step_wait`` steps the worlds, then waits (up to
-   ``timeout_s``) for the answers about ``s_t``, computes the alignment of the move
-   ``p_t -> p_{t+1}`` and of the new camera with the advice, and adds the LLM term to the
-   reward ``r_{t+1}``.
-3. The prompts for ``s_{t+1}`` go out at once.
+``student`` (the default for slow or paid advisors)
+    A distilled advisor (:class:`~pirl.advice.student.Student`) answers for the current state
+    of every world at every step (staleness 0). The teacher advisor is asked in the background
+    about sampled states at ``teacher_rate`` calls per env-step (:class:`TeacherQueue`); its
+    answers train the student, refit at rollout boundaries. Until the student's agreement with
+    held-out teacher answers reaches ``gate``, steps are left unshaped and counted. When the
+    teacher's budget is spent, the student goes on alone.
 
-``mode="async"`` never waits: each world uses the freshest answer that has arrived (reporting
-how many steps stale it is), and a new batch is sent whenever none is in flight. When the LLM
-is slower than an episode, that answer may come from an earlier episode of the same world;
-it is still used (its move as a direction, its camera as a target) and counted in
-``answers_cross_episode``. Sync mode only uses advice about the current episode.
+``sync`` (the paper's timing)
+    The prompts for ``s_t`` go to the advisor as soon as ``s_t`` exists (one batch for the
+    worlds due a query); ``step_wait`` waits (up to ``timeout_s``) for the answers. An answer
+    about an episode that has ended is never used.
 
-Between queries (``query_every`` K > 1) the last advice is reused: its move is read as a
-direction from the current position, its camera as a target. A failed, late or unparseable
-answer gives ``f_llm = 0`` for that step and is counted; it never stops training.
+``async``
+    Never waits: each world uses the freshest answer about its current episode (its staleness
+    in steps is reported); an answer about an episode that has ended is dropped and counted.
+
+Between queries (``query_every`` K > 1, teacher modes) the last advice is reused: its move is
+read as a direction from the current position, its camera as a target. A failed, late or
+unparseable answer leaves the step unshaped (``f_llm = 0``) and is not replaced by older
+advice. A spent budget stops teacher shaping at once. When more than ``max_failure_rate`` of
+the last ``failure_window`` teacher answers failed, :class:`AdvisorFailing` stops training.
 
 Per step, ``info["pare"]`` holds ``f_llm``, ``dir_align``, ``pos_align``, ``move``, ``cam``,
-``status`` (fresh, cached, stale or missing) and ``staleness`` (steps); the LLM term also
-appears in ``info["reward_terms"]["llm"]``.
+``status`` (fresh, cached, stale, student or missing) and ``staleness`` (steps); the LLM term
+also appears in ``info["reward_terms"]["llm"]``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import time
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
@@ -39,33 +49,50 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
 from pirl.advice.base import Advisor, Answer
+from pirl.advice.budget import BUDGET_EXHAUSTED
 from pirl.advice.factory import exhausted
 from pirl.advice.state import advice_requests
+from pirl.advice.student import Student, TeacherDataset, student_features
 from pirl.env.vec_env import VCPPVecEnv
 from pirl.pare.alignment import _align_one
+from pirl.pare.teacher import TeacherQueue
 from pirl.world import dynamics as D
 from pirl.world.config import ConfigError
 
-STATUSES = ("missing", "fresh", "cached", "stale")
-_MISSING, _FRESH, _CACHED, _STALE = range(4)
+MODES = ("student", "sync", "async")
+STATUSES = ("missing", "fresh", "cached", "stale", "student")
+_MISSING, _FRESH, _CACHED, _STALE, _STUDENT = range(5)
+# Advice rows: where the advice of a world came from.
+KIND_TEACHER, KIND_CACHED, KIND_STUDENT = 0, 1, 2
+# Columns of the advice metadata array.
+HAS, STEP, KIND = 0, 1, 2
+
+
+class AdvisorFailing(RuntimeError):
+    """Too many recent teacher answers failed; training stops (resumable)."""
 
 
 @numba.njit(cache=True)
-def _shape(
-    p_t, ints, rec, has, rec_step, rec_cached, t, d_max, alpha, lam_cam, lam_move, weights,
-    llm_col, rewards, terms, p_next, cam_next, table, status, staleness, counts,
-):  # fmt: skip
+def _shape(p_t, after, rec, meta, t, consts, weights, llm_col, rewards, terms, table, status,
+           staleness, counts):  # fmt: skip
     """One step of PARE for every world: alignment, f_llm, status, the shaped reward.
 
-    ``table`` rows get (f_llm, dir_align, pos_align, move, cam), all 0 without advice; the LLM
-    term is written into the step's reward terms and ``w_llm * f_llm`` added to ``rewards``.
-    ``counts`` accumulates (missing, fresh, cached, stale, staleness sum).
+    Reads ``p_t`` (positions before the step), ``after`` (the worlds' integer state after it),
+    ``rec`` (advice rows: pan, tilt, zoom, dx, dy, dz) and ``meta`` (has advice, step it was
+    asked at, kind), ``consts`` = (d_max, alpha, lam_cam, lam_move). Writes ``table`` rows
+    (f_llm, dir_align, pos_align, move, cam; 0 without advice), the LLM column of ``terms``,
+    ``rewards += w_llm * f_llm``, ``status``, ``staleness`` and accumulates ``counts``
+    (missing, fresh, cached, stale, student, staleness sum).
     """
-    for e in range(p_t.shape[0]):
-        p_next[e, 0], p_next[e, 1], p_next[e, 2] = ints[e, D.PX], ints[e, D.PY], ints[e, D.PZ]
-        cam_next[e, 0], cam_next[e, 1] = ints[e, D.TILT], ints[e, D.PAN]
-        cam_next[e, 2] = ints[e, D.ZOOM] / 10.0
-        if not has[e]:
+    n = p_t.shape[0]
+    p_next = np.empty((n, 3))
+    cam_next = np.empty((n, 3))
+    d_max, alpha, lam_cam, lam_move = consts[0], consts[1], consts[2], consts[3]
+    for e in range(n):
+        p_next[e, 0], p_next[e, 1], p_next[e, 2] = after[e, D.PX], after[e, D.PY], after[e, D.PZ]
+        cam_next[e, 0], cam_next[e, 1] = after[e, D.TILT], after[e, D.PAN]
+        cam_next[e, 2] = after[e, D.ZOOM] / 10.0
+        if meta[e, HAS] == 0:
             for k in range(5):
                 table[e, k] = 0.0
             status[e], staleness[e] = _MISSING, 0
@@ -77,33 +104,45 @@ def _shape(
         table[e, 0] = f
         terms[e, llm_col] = f
         rewards[e] += np.float32(weights[e, llm_col] * f)
-        staleness[e] = t - rec_step[e]
-        if staleness[e] > 0:
+        staleness[e] = t - meta[e, STEP]
+        if meta[e, KIND] == KIND_STUDENT:
+            status[e] = _STUDENT
+        elif staleness[e] > 0:
             status[e] = _STALE
-        elif rec_cached[e]:
+        elif meta[e, KIND] == KIND_CACHED:
             status[e] = _CACHED
         else:
             status[e] = _FRESH
         counts[status[e]] += 1
-        counts[4] += staleness[e]
+        counts[5] += staleness[e]
 
 
 @dataclass
 class _Job:
-    """One batch of prompts in flight."""
+    """One batch of teacher prompts in flight (sync and async modes)."""
 
     worlds: np.ndarray
     episodes: np.ndarray
     step: int
+    prompts: list[str]
+    views: list[Any] | None
     future: Future
     sent: float = field(default_factory=time.perf_counter)
 
 
 @dataclass
 class PareStats:
-    """Counters of one PARE run (all cumulative)."""
+    """Counters of one PARE run (all cumulative). :meth:`as_dict` adds the derived figures."""
 
+    label: str = ""
+    mode: str = ""
     steps: int = 0
+    steps_fresh: int = 0
+    steps_cached: int = 0
+    steps_stale: int = 0
+    steps_student: int = 0
+    steps_missing: int = 0
+    staleness_sum: int = 0
     prompts_sent: int = 0
     batches_sent: int = 0
     answers_ok: int = 0
@@ -111,18 +150,27 @@ class PareStats:
     answers_unparseable: int = 0
     answers_late: int = 0
     answers_cached: int = 0
-    answers_cross_episode: int = 0
-    steps_fresh: int = 0
-    steps_cached: int = 0
-    steps_stale: int = 0
-    steps_missing: int = 0
-    staleness_sum: int = 0
-    wait_s: float = 0.0
+    answers_dropped_ended: int = 0
+    teacher_skipped: int = 0
+    student_agreement: float = 0.0
+    student_majority: float = 0.0
+    student_heldout: int = 0
+    student_dataset_size: int = 0
+    student_refits: int = 0
+    gate_passed_at_step: int = -1
     budget_exhausted: bool = False
+    budget_exhausted_at_step: int = -1
+    failure_rate: float = 0.0
+    wait_s: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         out = dict(self.__dict__)
-        shaped = self.steps_fresh + self.steps_cached + self.steps_stale
+        teacher = self.steps_fresh + self.steps_cached + self.steps_stale
+        shaped = teacher + self.steps_student
+        out["steps_teacher"] = teacher
+        out["steps_unshaped"] = self.steps_missing
+        out["teacher_calls"] = self.prompts_sent
+        out["teacher_calls_per_step"] = self.prompts_sent / self.steps if self.steps else 0.0
         out["mean_staleness"] = self.staleness_sum / shaped if shaped else 0.0
         answered = self.answers_ok + self.answers_unparseable
         out["parse_rate"] = self.answers_ok / answered if answered else 0.0
@@ -135,12 +183,26 @@ class PAREVecEnv(VecEnvWrapper):
     Arguments:
         venv: the batched environment, made with ``llm_weight=True`` so that each episode
             draws (EWRI) or sets (static) the weight of the LLM term.
-        advisor: any :class:`~pirl.advice.base.Advisor` (wrap it in a cache or budget first).
-        query_every: K, ask every K steps of each world (paper: 1).
-        mode: ``"sync"`` (the paper's timing) or ``"async"`` (never blocks).
+        advisor: the teacher, any :class:`~pirl.advice.base.Advisor` (cached and budgeted).
+        query_every: K, teacher modes: ask every K steps of each world (paper: 1).
+        mode: ``"student"``, ``"sync"`` or ``"async"`` (see the module docstring).
         lam_cam, lam_move, alpha: the weights of DESIGN.md section 5.
         timeout_s: sync mode: longest wait for a batch; later answers count as late.
         prompt_variant, decimals: passed to :func:`pirl.advice.prompt.build_prompt`.
+        student: student mode: the distilled advisor (fitted or not).
+        dataset: student mode: where teacher answers are stored and read.
+        teacher_rate: student mode: teacher calls per env-step.
+        gate: student mode: held-out agreement the student needs before it shapes.
+        refit_every: student mode: vector steps between refits (PPO's ``n_steps``).
+        fit_steps: student mode: Adam steps per refit.
+        wait_teacher: student mode: collect the teacher's batch at each boundary (reproducible
+            runs; PPO then waits for a slow teacher).
+        max_failure_rate, failure_window: stop when more than this share of the last
+            ``failure_window`` teacher answers failed or did not parse (0 disables).
+        label: what this PIRL configuration is called in reports.
+        seed: the teacher's sampling stream.
+        source: student mode: the run's name in the teacher dataset. A resumed run deletes
+            the answers it stored there after its checkpoint, then stores them again.
     """
 
     def __init__(
@@ -155,15 +217,29 @@ class PAREVecEnv(VecEnvWrapper):
         timeout_s: float = 120.0,
         prompt_variant: str = "paper",
         decimals: int = 2,
+        student: Student | None = None,
+        dataset: TeacherDataset | None = None,
+        teacher_rate: float = 0.002,
+        gate: float = 0.8,
+        refit_every: int = 256,
+        fit_steps: int = 100,
+        wait_teacher: bool = False,
+        max_failure_rate: float = 0.5,
+        failure_window: int = 200,
+        label: str = "",
+        seed: int = 0,
+        source: str = "",
     ) -> None:
         if not isinstance(venv, VCPPVecEnv):
             raise ConfigError("PARE wraps the VCPPVecEnv itself (put VecMonitor outside it)")
         if not venv.cfg.llm_weight:
             raise ConfigError("PARE needs an environment made with llm_weight=True")
-        if mode not in ("sync", "async"):
-            raise ConfigError(f"mode={mode!r}: allowed values are sync, async")
+        if mode not in MODES:
+            raise ConfigError(f"mode={mode!r}: allowed values are {', '.join(MODES)}")
         if query_every < 1:
             raise ConfigError(f"query_every={query_every!r}: must be >= 1")
+        if mode == "student" and (student is None or dataset is None):
+            raise ConfigError("student mode needs a student and its teacher dataset")
         super().__init__(venv)
         self.advisor = advisor
         self.query_every = int(query_every)
@@ -171,40 +247,125 @@ class PAREVecEnv(VecEnvWrapper):
         self.lam_cam, self.lam_move, self.alpha = float(lam_cam), float(lam_move), float(alpha)
         self.timeout_s = float(timeout_s)
         self.prompt_variant, self.decimals = prompt_variant, int(decimals)
-        self.stats = PareStats()
+        self.student, self.dataset = student, dataset
+        self.gate, self.refit_every = float(gate), int(refit_every)
+        self.fit_steps, self.wait_teacher = int(fit_steps), bool(wait_teacher)
+        self.max_failure_rate, self.failure_window = float(max_failure_rate), int(failure_window)
+        self.stats = PareStats(label=label, mode=mode)
 
         n = venv.num_envs
         self._world = venv.world
         self._rec = np.zeros((n, 6), dtype=np.float64)  # pan, tilt, zoom, dx, dy, dz
-        self._has_rec = np.zeros(n, dtype=bool)
-        self._rec_step = np.zeros(n, dtype=np.int64)
-        self._rec_cached = np.zeros(n, dtype=bool)
+        self._meta = np.zeros((n, 3), dtype=np.int64)  # has advice, step asked, kind
         self._episode = np.zeros(n, dtype=np.int64)
         self._episode_step = np.zeros(n, dtype=np.int64)
         self._want = np.zeros(n, dtype=bool)  # due a query, not yet sent
         self._p_t = np.zeros((n, 3), dtype=np.float64)
-        self._p_next = np.zeros((n, 3), dtype=np.float64)
-        self._cam_next = np.zeros((n, 3), dtype=np.float64)
         self._table = np.zeros((n, 5), dtype=np.float64)
         self._status = np.zeros(n, dtype=np.int64)
         self._staleness = np.zeros(n, dtype=np.int64)
-        self._counts = np.zeros(5, dtype=np.int64)  # missing, fresh, cached, stale, stale sum
-        self._d_max = float(np.linalg.norm(np.asarray(venv.cfg.size, dtype=np.float64) - 1.0))
+        self._counts = np.zeros(6, dtype=np.int64)
+        d_max = float(np.linalg.norm(np.asarray(venv.cfg.size, dtype=np.float64) - 1.0))
+        self._consts = np.array([d_max, self.alpha, self.lam_cam, self.lam_move])
+        self._failures: deque[bool] = deque(maxlen=max(1, self.failure_window))
         self._t = 0
         self._job: _Job | None = None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pare-advisor")
+        self.teacher: TeacherQueue | None = None
+        if mode == "student":
+            assert student is not None and dataset is not None
+            self.teacher = TeacherQueue(
+                advisor, dataset, student.teacher, teacher_rate,
+                max_pending=max(64, int(2 * teacher_rate * n * self.refit_every) + 1),
+                prompt_variant=prompt_variant, decimals=decimals, seed=seed, source=source,
+            )  # fmt: skip
+            self._update_student_stats()
 
-    # -- requests -------------------------------------------------------------------------
+    # -- advice sources ---------------------------------------------------------------------
+    def _advise_current(self, obs: np.ndarray) -> None:
+        """Student mode: the student's advice about every world's current state."""
+        assert self.student is not None and self.teacher is not None
+        features = student_features(obs, self._world, range(self.num_envs))
+        self.teacher.sample(self._world, features)
+        if self.student.passes(self.gate):
+            self._rec[:] = self.student.predict(features)
+            self._meta[:, HAS] = 1
+            self._meta[:, STEP] = self._t
+            self._meta[:, KIND] = KIND_STUDENT
+        else:
+            self._meta[:, HAS] = 0
+
+    def _boundary(self) -> None:
+        """Student mode, at a rollout boundary: store teacher answers, refit the student."""
+        assert self.student is not None and self.teacher is not None
+        answers = self.teacher.boundary(self._t, wait=self.wait_teacher, timeout_s=self.timeout_s)
+        self._account(answers)
+        self.stats.prompts_sent = self.teacher.sent
+        self.stats.teacher_skipped = self.teacher.skipped
+        assert self.dataset is not None
+        if self.student.pull(self.dataset):
+            self.student.fit(self.fit_steps)
+            self.stats.student_refits += 1
+        self._update_student_stats()
+        self._check_budget()
+
+    def _update_student_stats(self) -> None:
+        assert self.student is not None
+        score, st = self.student.score, self.stats
+        st.student_agreement, st.student_majority = score.agreement, score.majority
+        st.student_heldout, st.student_dataset_size = score.heldout, self.student.dataset_size
+        if st.gate_passed_at_step < 0 and self.student.passes(self.gate):
+            st.gate_passed_at_step = st.steps
+
+    def _check_budget(self) -> None:
+        """A spent budget stops teacher shaping at once (the student goes on)."""
+        if self.stats.budget_exhausted or not exhausted(self.advisor):
+            return
+        self.stats.budget_exhausted = True
+        self.stats.budget_exhausted_at_step = self.stats.steps
+        if self.mode != "student":
+            self._meta[:, HAS] = 0
+            self._want[:] = False
+
+    def _account(self, answers: list[Answer]) -> None:
+        """Count teacher answers and watch the rolling failure rate."""
+        st = self.stats
+        for answer in answers:
+            if answer.error == BUDGET_EXHAUSTED:
+                continue
+            if answer.error is not None:
+                st.answers_failed += 1
+            elif answer.recommendation is None:
+                st.answers_unparseable += 1
+            else:
+                st.answers_ok += 1
+                st.answers_cached += int(answer.from_cache)
+            self._failures.append(not answer.ok)
+        if self._failures:
+            st.failure_rate = float(np.mean(self._failures))
+        evidence = min(self.failure_window, 50)
+        if (
+            self.max_failure_rate > 0
+            and len(self._failures) >= evidence
+            and st.failure_rate > self.max_failure_rate
+        ):
+            last = next((a.error for a in reversed(answers) if a.error), "answers did not parse")
+            raise AdvisorFailing(
+                f"advisor {self.advisor.label}: {st.failure_rate:.0%} of the last "
+                f"{len(self._failures)} answers failed (pare.max_failure_rate "
+                f"{self.max_failure_rate:g}); last error: {last}"
+            )
+
     def _submit(self, worlds: np.ndarray) -> None:
-        """Send the prompts of ``worlds`` (their current state) as one batch."""
-        if not worlds.size or exhausted(self.advisor):
-            self.stats.budget_exhausted = exhausted(self.advisor)
+        """Teacher modes: send the prompts of ``worlds`` (their current state) as one batch."""
+        self._check_budget()
+        if not worlds.size or self.stats.budget_exhausted:
             return
         prompts, views = advice_requests(
             self._world, worlds, self.advisor, self.prompt_variant, self.decimals
         )
         future = self._pool.submit(self.advisor.advise, prompts, views)
-        self._job = _Job(worlds, self._episode[worlds].copy(), self._t, future)
+        self._job = _Job(worlds, self._episode[worlds].copy(), self._t, prompts, views, future)
         self.stats.prompts_sent += len(prompts)
         self.stats.batches_sent += 1
 
@@ -217,78 +378,67 @@ class PAREVecEnv(VecEnvWrapper):
             self._submit(worlds)
 
     def _collect(self, wait: bool) -> None:
-        """Take the in-flight batch's answers if they are there (sync: wait for them)."""
+        """Teacher modes: take the in-flight batch's answers if there (sync: wait for them)."""
         job = self._job
-        if job is None:
-            return
-        if not wait and not job.future.done():
+        if job is None or (not wait and not job.future.done()):
             return
         start = time.perf_counter()
         try:
             answers: list[Answer] = job.future.result(timeout=self.timeout_s if wait else 0)
         except FutureTimeout:
-            # Late: the step goes on without advice; the batch is dropped.
+            # Late: those worlds go on without advice until their next answer.
             self.stats.answers_late += len(job.worlds)
             self.stats.wait_s += time.perf_counter() - start
             self._job = None
-            self._has_rec[job.worlds] = False
+            self._meta[job.worlds, HAS] = 0
             return
-        except Exception as exc:  # an advisor must not raise; if one does, training goes on
+        except Exception as exc:  # an advisor must not raise; if one does, count it as failed
             answers = [Answer("", None, error=f"{type(exc).__name__}: {exc}")] * len(job.worlds)
         self.stats.wait_s += time.perf_counter() - start
         self._job = None
         for e, episode, answer in zip(job.worlds, job.episodes, answers, strict=True):
-            if answer.error is not None:
-                self.stats.answers_failed += 1
-            elif answer.recommendation is None:
-                self.stats.answers_unparseable += 1
-            else:
-                self.stats.answers_ok += 1
-                self.stats.answers_cached += int(answer.from_cache)
             if episode != self._episode[e]:
-                if self.mode == "sync":
-                    continue  # that episode is over
-                # Async uses the freshest answer that has arrived, even one asked in an
-                # earlier episode of this world: a slow LLM's answers may never arrive within
-                # one episode. Its staleness says so.
-                self.stats.answers_cross_episode += 1
+                # That episode is over: its advice is about a state that no longer exists.
+                self.stats.answers_dropped_ended += 1
+                continue
             rec = answer.recommendation
             if rec is None:
-                self._has_rec[e] = False
+                self._meta[e, HAS] = 0
                 continue
             self._rec[e] = (rec.pan, rec.tilt, rec.zoom, rec.dx, rec.dy, rec.dz)
-            self._has_rec[e] = True
-            self._rec_step[e] = job.step
-            self._rec_cached[e] = answer.from_cache
+            self._meta[e] = (1, job.step, KIND_CACHED if answer.from_cache else KIND_TEACHER)
+        self._account(answers)
 
     # -- VecEnv ---------------------------------------------------------------------------
     def reset(self) -> np.ndarray:
         obs = self.venv.reset()
         self._drain()
-        self._has_rec[:] = False
+        self._meta[:, HAS] = 0
         self._episode += 1
         self._episode_step[:] = 0
         self._want[:] = False
-        self._send_due()
+        if self.mode == "student":
+            self._advise_current(obs)
+        else:
+            self._send_due()
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        ints = self._world.ints
-        self._p_t[:] = ints[:, D.PX : D.PZ + 1]
+        self._p_t[:] = self._world.ints[:, D.PX : D.PZ + 1]
         self.venv.step_async(actions)
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
-        self._collect(wait=self.mode == "sync")
+        if self.mode != "student":
+            self._collect(wait=self.mode == "sync")
+            self._check_budget()
         # The snapshot was taken before auto-reset: it holds p_{t+1}, the camera after the
         # action and the ended episodes' weights.
         snap = self.venv.step_snapshot
         table, status, staleness = self._table, self._status, self._staleness
         _shape(
-            self._p_t, snap.ints, self._rec, self._has_rec, self._rec_step, self._rec_cached,
-            self._t, self._d_max, self.alpha, self.lam_cam, self.lam_move, snap.weights,
-            D.T_LLM, rewards, snap.terms, self._p_next, self._cam_next, table, status,
-            staleness, self._counts,
+            self._p_t, snap.ints, self._rec, self._meta, self._t, self._consts, snap.weights,
+            D.T_LLM, rewards, snap.terms, table, status, staleness, self._counts,
         )  # fmt: skip
         # Copies: the lazy infos read them later, after these buffers moved on.
         table, status, staleness = table.copy(), status.copy(), staleness.copy()
@@ -303,24 +453,82 @@ class PAREVecEnv(VecEnvWrapper):
         }
         st, counts = self.stats, self._counts
         st.steps += self.num_envs
-        st.steps_missing, st.steps_fresh, st.steps_cached, st.steps_stale = (
+        st.steps_missing, st.steps_fresh, st.steps_cached = (
             int(counts[_MISSING]),
             int(counts[_FRESH]),
             int(counts[_CACHED]),
-            int(counts[_STALE]),
         )
-        st.staleness_sum = int(counts[4])
+        st.steps_stale, st.steps_student = int(counts[_STALE]), int(counts[_STUDENT])
+        st.staleness_sum = int(counts[5])
         self._t += 1
         self._episode_step += 1
         if dones.any():
             ended = np.flatnonzero(dones)
             self._episode[ended] += 1
             self._episode_step[ended] = 0
-            if self.mode == "sync":
-                self._has_rec[ended] = False
+            self._meta[ended, HAS] = 0  # advice is about one episode only
             self._want[ended] = False
-        self._send_due()
+        if self.mode == "student":
+            if self._t % self.refit_every == 0:
+                self._boundary()
+            self._advise_current(obs)
+        else:
+            self._send_due()
         return obs, rewards, dones, infos
+
+    # -- state ------------------------------------------------------------------------------
+    _ARRAYS = ("_rec", "_meta", "_episode", "_episode_step", "_want", "_p_t", "_counts")
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume (at a rollout boundary).
+
+        Sync mode waits for the batch in flight (it would anyway), so its resume is exact;
+        async mode keeps the batch's prompts and asks them again on resume (its answers arrive
+        at other steps than they would have). Student mode keeps the student, the teacher's
+        queue and its batch in flight (asked again on resume).
+        """
+        pending = None
+        job = self._job
+        if job is not None:
+            answers = job.future.result() if self.mode == "sync" else None
+            pending = (job.worlds, job.episodes, job.step, job.prompts, job.views, answers)
+        return {
+            "arrays": {name: getattr(self, name).copy() for name in self._ARRAYS},
+            "t": self._t,
+            "stats": copy.deepcopy(self.stats),
+            "failures": list(self._failures),
+            "pending": pending,
+            "student": self.student.state_dict() if self.student is not None else None,
+            "teacher": self.teacher.state_dict() if self.teacher is not None else None,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`state_dict` into a freshly built wrapper."""
+        for name, value in state["arrays"].items():
+            getattr(self, name)[...] = value
+        self._t = state["t"]
+        label = self.stats.label
+        self.stats = copy.deepcopy(state["stats"])
+        self.stats.label = label or self.stats.label
+        self._failures.clear()
+        self._failures.extend(state["failures"])
+        self._job = None
+        if state["pending"] is not None:
+            worlds, episodes, step, prompts, views, answers = state["pending"]
+            future: Future
+            if answers is not None:
+                future = Future()
+                future.set_result(answers)
+            else:
+                future = self._pool.submit(self.advisor.advise, prompts, views)
+            self._job = _Job(worlds, episodes, step, prompts, views, future)
+        if self.student is not None and state["student"] is not None:
+            assert self.dataset is not None and self.teacher is not None
+            # What this run stored after the checkpoint is stored again as it replays.
+            self.dataset.forget(self.teacher.source, after=self._t)
+            self.student.load_state_dict(state["student"], self.dataset)
+        if self.teacher is not None and state["teacher"] is not None:
+            self.teacher.load_state_dict(state["teacher"])
 
     def _drain(self) -> None:
         if self._job is not None:
@@ -332,5 +540,7 @@ class PAREVecEnv(VecEnvWrapper):
     def close(self) -> None:
         self._drain()
         self._pool.shutdown(wait=True)
+        if self.teacher is not None:
+            self.teacher.close()
         self.advisor.close()
         self.venv.close()

@@ -1,0 +1,462 @@
+"""The distilled advisor (student): a small torch model that imitates a teacher advisor.
+
+A teacher (the embedded LLM, an OpenAI-compatible server, the oracle) is slow or paid; PARE
+wants advice about the current state at every step. The student maps what its teacher sees to
+a :class:`~pirl.advice.recommendation.Recommendation` in microseconds, so PARE can shape every
+step with advice about the state the drone is in, while the teacher is asked about a few
+sampled states only (the pattern of ONI and Motif: distil LLM labels into a small model).
+
+Input (:func:`student_features`, fixed size for any world): the environment's observation
+(local coverage and obstacle windows, the coarse global coverage map, normalised position,
+camera, battery, coverage, steps left) plus the world size and the absolute position, which
+the prompt shows. Obstacles far outside the local window are not in it; the oracle plans from
+the coverage map, which the observation summarises.
+
+Output: one classification head per field over its allowed values: pan in 15 degree steps,
+tilt in 5 degree steps, zoom in 0.1 steps (the camera grid the drone can reach) and -1/0/1 for
+each move component. A teacher's answer is snapped to the nearest class.
+
+Teacher answers live with the state they were asked about in a :class:`TeacherDataset`
+(SQLite, WAL, beside the answer cache), shared by runs and processes and keyed by the teacher
+and everything that changes its answers or the features.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import sqlite3
+import time
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from pirl.advice.recommendation import Recommendation
+from pirl.world import dynamics as D
+from pirl.world.state import WorldBatch
+
+FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
+"""The six fields of a recommendation, in the student's head order."""
+CLASSES: tuple[np.ndarray, ...] = (
+    np.arange(-90.0, 91.0, 15.0),  # pan
+    np.arange(0.0, 91.0, 5.0),  # tilt
+    np.round(np.arange(5, 21) / 10.0, 1),  # zoom
+    np.array([-1.0, 0.0, 1.0]),  # dx
+    np.array([-1.0, 0.0, 1.0]),  # dy
+    np.array([-1.0, 0.0, 1.0]),  # dz
+)
+"""The allowed values of each field (the camera grid of the world and the one-cell moves)."""
+N_EXTRA = 6
+"""Features after the observation: world size X, Y, Z and absolute position x, y, z (/64)."""
+FEATURE_VERSION = 1
+"""Bumped when the features change, so old dataset rows are not mixed with new ones."""
+MIN_HELDOUT = 20
+"""Fewest held-out answers before the student's agreement is trusted (and the gate can open)."""
+
+
+def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) -> np.ndarray:
+    """Features of ``worlds`` (rows of ``obs`` are their observations now), float32."""
+    rows = np.asarray(worlds, dtype=np.int64)
+    out = np.empty((len(rows), obs.shape[1] + N_EXTRA), dtype=np.float32)
+    out[:, : obs.shape[1]] = obs
+    out[:, obs.shape[1] : obs.shape[1] + 3] = np.asarray(world.cfg.size, dtype=np.float32) / 64.0
+    out[:, obs.shape[1] + 3 :] = world.ints[rows, D.PX : D.PZ + 1] / 64.0
+    return out
+
+
+def encode(recs: Sequence[Recommendation]) -> np.ndarray:
+    """Class indices (n, 6) of recommendations: each value snapped to its nearest class."""
+    values = np.array([[r.pan, r.tilt, r.zoom, r.dx, r.dy, r.dz] for r in recs], dtype=np.float64)
+    values = values.reshape(-1, len(FIELDS))
+    out = np.empty(values.shape, dtype=np.int64)
+    for k, classes in enumerate(CLASSES):
+        out[:, k] = np.abs(values[:, k : k + 1] - classes[None, :]).argmin(axis=1)
+    return out
+
+
+def decode(labels: np.ndarray) -> np.ndarray:
+    """Values (n, 6) as (pan, tilt, zoom, dx, dy, dz) from class indices."""
+    return np.stack([CLASSES[k][labels[:, k]] for k in range(len(FIELDS))], axis=1)
+
+
+def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
+    """Dataset key: the teacher and every setting that changes its answers or the features."""
+    settings = advisor.settings_key() if hasattr(advisor, "settings_key") else ""
+    parts = [
+        advisor.name, advisor.model, settings, prompt_variant, env_cfg.footprint, env_cfg.fov_deg,
+        env_cfg.max_range, env_cfg.occlusion, env_cfg.obs_window, env_cfg.obs_global,
+        FEATURE_VERSION,
+    ]  # fmt: skip
+    digest = hashlib.sha256(json.dumps(parts, default=str).encode()).hexdigest()[:16]
+    return f"{advisor.name}:{advisor.model}:{digest}"
+
+
+def default_dataset_path() -> Path:
+    """``$PIRL_CACHE_DIR/student.sqlite`` or ``~/.cache/pirl/student.sqlite``."""
+    base = os.environ.get("PIRL_CACHE_DIR") or Path.home() / ".cache" / "pirl"
+    return Path(base) / "student.sqlite"
+
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS samples (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    teacher TEXT NOT NULL,
+    features BLOB NOT NULL,
+    labels TEXT NOT NULL,
+    source TEXT NOT NULL,
+    t INTEGER NOT NULL,
+    created REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS samples_teacher ON samples (teacher, id);
+"""
+
+
+class TeacherDataset:
+    """Teacher answers with the features of the state they were asked about (SQLite, WAL).
+
+    Several processes may append and read at once. Row ids only grow, so a reader that
+    remembers the last id it has seen loads exactly the rows added since.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], timeout_s: float = 60.0) -> None:
+        self.path = Path(path).expanduser()
+        self.timeout_s = timeout_s
+        self._conn: sqlite3.Connection | None = None
+        self._pid = -1
+        self._connection()
+
+    def _connection(self) -> sqlite3.Connection:
+        if self._conn is None or self._pid != os.getpid():
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            conn = sqlite3.connect(
+                self.path, timeout=self.timeout_s, isolation_level=None, check_same_thread=False
+            )
+            conn.execute("PRAGMA journal_mode=WAL")
+            conn.executescript(_SCHEMA)
+            self._conn, self._pid = conn, os.getpid()
+        return self._conn
+
+    def add(
+        self, teacher: str, features: np.ndarray, labels: np.ndarray, source: str = "", t: int = 0
+    ) -> int:
+        """Append rows; returns how many. ``source`` and ``t`` name the run and its step, so a
+        resumed run can :meth:`forget` what it stored after its checkpoint."""
+        now = time.time()
+        rows = [
+            (
+                teacher, np.asarray(f, dtype=np.float32).tobytes(), json.dumps(lab.tolist()),
+                source, int(t), now,
+            )
+            for f, lab in zip(features, labels, strict=True)
+        ]  # fmt: skip
+        if rows:
+            conn = self._connection()
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                conn.executemany(
+                    "INSERT INTO samples (teacher, features, labels, source, t, created) "
+                    "VALUES (?,?,?,?,?,?)",
+                    rows,
+                )
+                conn.execute("COMMIT")
+            except BaseException:
+                conn.execute("ROLLBACK")
+                raise
+        return len(rows)
+
+    def load(
+        self, teacher: str, after: int = 0, upto: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows of ``teacher`` with ``after < id <= upto``: (ids, features, labels)."""
+        query = "SELECT id, features, labels FROM samples WHERE teacher = ? AND id > ?"
+        args: list[Any] = [teacher, int(after)]
+        if upto is not None:
+            query += " AND id <= ?"
+            args.append(int(upto))
+        rows = self._connection().execute(query + " ORDER BY id", args).fetchall()
+        if not rows:
+            return (np.zeros(0, np.int64), np.zeros((0, 0), np.float32), np.zeros((0, 6), np.int64))
+        ids = np.array([r[0] for r in rows], dtype=np.int64)
+        feats = np.stack([np.frombuffer(r[1], dtype=np.float32) for r in rows])
+        labels = np.array([json.loads(r[2]) for r in rows], dtype=np.int64)
+        return ids, feats, labels
+
+    def forget(self, source: str, after: int) -> int:
+        """Delete the rows ``source`` stored after its step ``after``; returns how many."""
+        if not source:
+            return 0
+        cur = self._connection().execute(
+            "DELETE FROM samples WHERE source = ? AND t > ?", (source, int(after))
+        )
+        return int(cur.rowcount)
+
+    def count(self, teacher: str) -> int:
+        """Rows stored for ``teacher``."""
+        row = (
+            self._connection()
+            .execute("SELECT COUNT(*) FROM samples WHERE teacher = ?", (teacher,))
+            .fetchone()
+        )
+        return int(row[0])
+
+    def close(self) -> None:
+        if self._conn is not None and self._pid == os.getpid():
+            self._conn.close()
+        self._conn = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"path": self.path, "timeout_s": self.timeout_s}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["path"], state["timeout_s"])
+
+
+class StudentNet(nn.Module):
+    """An MLP trunk with one classification head per recommendation field."""
+
+    def __init__(self, n_features: int, hidden: int = 128) -> None:
+        super().__init__()
+        self.trunk = nn.Sequential(
+            nn.Linear(n_features, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+        )
+        self.heads = nn.ModuleList(nn.Linear(hidden, len(c)) for c in CLASSES)
+
+    def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
+        h = self.trunk(x)
+        return [head(h) for head in self.heads]
+
+
+@dataclass
+class StudentScore:
+    """How well the student imitates its teacher on held-out teacher answers."""
+
+    agreement: float
+    """Exact-match accuracy averaged over the six fields."""
+    majority: float
+    """The same score for always answering each field's most frequent training value."""
+    heldout: int
+    """Held-out answers scored."""
+    per_field: dict[str, float]
+    """Exact-match accuracy of each field."""
+
+
+class Student:
+    """The distilled advisor: imitates one teacher (``teacher``, a :func:`teacher_key`).
+
+    About one row in five is held out for scoring (chosen by a checksum of its features, so
+    the split does not depend on row ids or on who stored the row); the rest trains.
+    :meth:`fit` runs a fixed number of Adam steps on seeded minibatches, warm-started, so a run
+    refits the same way every time it meets the same data.
+    """
+
+    def __init__(
+        self,
+        teacher: str,
+        n_features: int,
+        label: str = "",
+        hidden: int = 128,
+        lr: float = 1e-3,
+        batch_size: int = 256,
+        seed: int = 0,
+    ) -> None:
+        self.teacher, self.n_features, self.label = teacher, int(n_features), label
+        self.hidden, self.lr, self.batch_size = int(hidden), float(lr), int(batch_size)
+        with torch.random.fork_rng():
+            torch.manual_seed(seed)
+            self.net = StudentNet(self.n_features, self.hidden)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=self.lr)
+        self.gen = torch.Generator().manual_seed(seed)
+        self.last_id = 0
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._held = np.zeros(0, dtype=bool)
+        self._x = np.zeros((0, self.n_features), dtype=np.float32)
+        self._y = np.zeros((0, len(FIELDS)), dtype=np.int64)
+        self.fitted_rows = 0
+        self.score = StudentScore(0.0, 0.0, 0, {})
+
+    # -- data -------------------------------------------------------------------------------
+    @property
+    def dataset_size(self) -> int:
+        """Teacher answers the student has (train and held-out)."""
+        return len(self._ids)
+
+    def add(self, ids: np.ndarray, features: np.ndarray, labels: np.ndarray) -> None:
+        """Take rows (ids increasing); rows of another feature width are ignored."""
+        if not len(ids):
+            return
+        if features.shape[1] != self.n_features:
+            return
+        held = np.array([zlib.crc32(row.tobytes()) % 5 == 0 for row in features], dtype=bool)
+        self._held = np.concatenate([self._held, held])
+        self._ids = np.concatenate([self._ids, ids])
+        self._x = np.concatenate([self._x, features.astype(np.float32)])
+        self._y = np.concatenate([self._y, labels.astype(np.int64)])
+        self.last_id = max(self.last_id, int(ids.max()))
+
+    def pull(self, dataset: TeacherDataset, upto: int | None = None) -> int:
+        """Load the rows of this teacher added to ``dataset`` since the last pull."""
+        ids, x, y = dataset.load(self.teacher, after=self.last_id, upto=upto)
+        before = self.dataset_size
+        self.add(ids, x, y)
+        return self.dataset_size - before
+
+    def _split(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.flatnonzero(~self._held), np.flatnonzero(self._held)
+
+    # -- learning ---------------------------------------------------------------------------
+    def fit(self, steps: int) -> StudentScore:
+        """``steps`` Adam steps on the training rows, then score on the held-out rows."""
+        train, _ = self._split()
+        if len(train):
+            x = torch.from_numpy(self._x[train])
+            y = torch.from_numpy(self._y[train])
+            loss_fn = nn.CrossEntropyLoss()
+            self.net.train()
+            for _ in range(int(steps)):
+                idx = torch.randint(
+                    0, len(train), (min(self.batch_size, len(train)),), generator=self.gen
+                )
+                logits = self.net(x[idx])
+                loss = sum(loss_fn(lg, y[idx, k]) for k, lg in enumerate(logits))
+                self.opt.zero_grad()
+                loss.backward()
+                self.opt.step()
+        self.fitted_rows = self.dataset_size
+        self.score = self.evaluate()
+        return self.score
+
+    def evaluate(self) -> StudentScore:
+        """Agreement and the majority baseline on the held-out rows."""
+        train, held = self._split()
+        if not len(held) or not len(train):
+            return StudentScore(0.0, 0.0, int(len(held)), {})
+        pred = self.predict_labels(self._x[held])
+        truth = self._y[held]
+        per_field = {f: float((pred[:, k] == truth[:, k]).mean()) for k, f in enumerate(FIELDS)}
+        majority = []
+        for k in range(len(FIELDS)):
+            common = np.bincount(self._y[train, k], minlength=len(CLASSES[k])).argmax()
+            majority.append(float((truth[:, k] == common).mean()))
+        return StudentScore(
+            float(np.mean(list(per_field.values()))), float(np.mean(majority)), len(held), per_field
+        )
+
+    def passes(self, gate: float) -> bool:
+        """Whether the held-out agreement has reached ``gate`` on enough held-out answers."""
+        return self.score.heldout >= MIN_HELDOUT and self.score.agreement >= gate
+
+    # -- advice -----------------------------------------------------------------------------
+    @torch.no_grad()
+    def predict_labels(self, features: np.ndarray) -> np.ndarray:
+        """Class indices (n, 6) for feature rows."""
+        self.net.eval()
+        logits = self.net(torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32)))
+        return torch.stack([lg.argmax(dim=1) for lg in logits], dim=1).numpy()
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        """Advice values (n, 6) as (pan, tilt, zoom, dx, dy, dz)."""
+        return decode(self.predict_labels(features))
+
+    # -- state ------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to continue exactly (the data is reloaded from the dataset)."""
+        return {
+            "teacher": self.teacher,
+            "n_features": self.n_features,
+            "label": self.label,
+            "hidden": self.hidden,
+            "lr": self.lr,
+            "batch_size": self.batch_size,
+            "net": {k: v.clone() for k, v in self.net.state_dict().items()},
+            "opt": _clone(self.opt.state_dict()),
+            "gen": self.gen.get_state(),
+            "last_id": self.last_id,
+            "ids": self._ids.copy(),
+            "fitted_rows": self.fitted_rows,
+            "score": self.score,
+        }
+
+    def load_state_dict(
+        self, state: dict[str, Any], dataset: TeacherDataset | None, strict: bool = True
+    ) -> None:
+        """Restore a :meth:`state_dict`; its rows are read back from ``dataset`` by id.
+
+        ``strict``: every row must still be there (a resumed run); otherwise (a student copied
+        to another machine) the student keeps its weights and the rows that are there.
+        """
+        if state["teacher"] != self.teacher:
+            raise ValueError(f"student of {state['teacher']}, not of {self.teacher}")
+        self.net.load_state_dict(state["net"])
+        self.opt.load_state_dict(state["opt"])
+        self.gen.set_state(state["gen"])
+        self.fitted_rows, self.score = state["fitted_rows"], state["score"]
+        ids = np.asarray(state["ids"], dtype=np.int64)
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._held = np.zeros(0, dtype=bool)
+        self._x = np.zeros((0, self.n_features), dtype=np.float32)
+        self._y = np.zeros((0, len(FIELDS)), dtype=np.int64)
+        self.last_id = 0
+        if len(ids) and dataset is not None:
+            got, x, y = dataset.load(self.teacher, after=0, upto=int(state["last_id"]))
+            keep = np.isin(got, ids)
+            self.add(got[keep], x[keep], y[keep])
+            if strict and self.dataset_size != len(ids):
+                raise ValueError(
+                    f"the teacher dataset {dataset.path} lost {len(ids) - self.dataset_size} "
+                    "rows this student was trained on"
+                )
+        self.last_id = int(state["last_id"])
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the student (weights, optimizer, score, row ids) atomically."""
+        path = Path(path)
+        buf = io.BytesIO()
+        torch.save(self.state_dict(), buf)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_bytes(buf.getvalue())
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], dataset: TeacherDataset | None) -> Student:
+        """A student saved with :meth:`save`."""
+        state = torch.load(Path(path), map_location="cpu", weights_only=False)
+        student = cls(
+            state["teacher"], state["n_features"], state["label"], state["hidden"], state["lr"],
+            state["batch_size"],
+        )  # fmt: skip
+        student.load_state_dict(state, dataset, strict=False)
+        return student
+
+
+def _clone(obj: Any) -> Any:
+    if isinstance(obj, torch.Tensor):
+        return obj.clone()
+    if isinstance(obj, dict):
+        return {k: _clone(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_clone(v) for v in obj]
+    return obj
+
+
+__all__ = [
+    "CLASSES",
+    "FIELDS",
+    "Student",
+    "StudentNet",
+    "StudentScore",
+    "TeacherDataset",
+    "decode",
+    "default_dataset_path",
+    "encode",
+    "student_features",
+    "teacher_key",
+]

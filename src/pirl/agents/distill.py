@@ -1,0 +1,152 @@
+"""``pirl distill``: make a student of a teacher advisor offline, before any PPO run.
+
+States come from rollouts of simple or trained policies on the training world (a planner,
+random actions, a finished run); the teacher answers each sampled state; answers go into the
+shared teacher dataset; the student is fitted on every answer that dataset holds for this
+teacher and written to ``out/student.pt`` with ``out/student.json`` (its teacher, agreement,
+the majority baseline and how it was made). ``pirl train --method pirl --student out`` starts
+from it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pirl.agents.config import RunConfig
+from pirl.agents.loading import load_policy
+from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
+from pirl.world.config import ConfigError, UserError
+
+Progress = Callable[[int, int], None]
+
+
+def collect_states(
+    cfg: RunConfig,
+    advisor: Any,
+    policies: Sequence[str],
+    states: int,
+    seed: int = 0,
+    keep: float = 0.25,
+) -> tuple[list[str], list[Any] | None, np.ndarray]:
+    """Prompts, views (when the advisor wants them) and student features of ``states`` states.
+
+    Episodes alternate between ``policies``; each step is kept with probability ``keep`` so
+    that the states spread over whole episodes. Scenario seeds start at ``2_000_000 + seed``
+    (apart from training's and evaluation's).
+    """
+    from pirl.advice.state import advice_requests
+    from pirl.advice.student import student_features
+    from pirl.env.vcpp_env import VCPPEnv
+
+    env = VCPPEnv(cfg.env.replace(reward="ewri", llm_weight=True))
+    rng = np.random.default_rng(seed)
+    loaded = [load_policy(p, seed=seed) for p in policies]
+    prompts: list[str] = []
+    views: list[Any] = []
+    feats: list[np.ndarray] = []
+    episode = 0
+    while len(prompts) < states:
+        scenario = 2_000_000 + seed * 100_000 + episode
+        policy = loaded[episode % len(loaded)]
+        obs, info = env.reset(seed=scenario)
+        policy.reset(env.world, 0, seed=scenario)
+        done = False
+        while not done and len(prompts) < states:
+            if rng.random() < keep:
+                p, v = advice_requests(env.world, [0], advisor, cfg.pare.prompt_variant)
+                prompts += p
+                if v is not None:
+                    views += v
+                feats.append(student_features(obs[None], env.world, [0])[0])
+            obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+            done = terminated or truncated
+        episode += 1
+    return prompts, (views or None), np.stack(feats)
+
+
+def distill(
+    cfg: RunConfig,
+    teacher: str,
+    states: int,
+    out: Path,
+    policies: Sequence[str] = ("boustrophedon", "random"),
+    seed: int = 0,
+    fit_steps: int = 2000,
+    batch_size: int = 32,
+    progress: Progress | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Ask ``teacher`` about ``states`` states, fit a student, write it to ``out``.
+
+    Returns the student's record (also written as ``out/student.json``).
+    """
+    from pirl.advice.student import encode
+
+    out = Path(out)
+    if out.exists():
+        raise ConfigError(f"student folder {out} already exists; choose another --out")
+    if states < 1:
+        raise ConfigError(f"--states {states}: must be >= 1")
+    cfg = cfg.with_overrides(pare={"advisor": teacher, "mode": "student"})
+    advice = build_pirl_advice(cfg, probe=True, seed=seed)
+    advisor, student, dataset = advice.advisor, advice.student, advice.dataset
+    assert student is not None and dataset is not None
+    started = time.perf_counter()
+    try:
+        prompts, views, feats = collect_states(cfg, advisor, policies, states, seed)
+        asked = ok = 0
+        for lo in range(0, len(prompts), batch_size):
+            hi = min(lo + batch_size, len(prompts))
+            answers = advisor.advise(prompts[lo:hi], None if views is None else views[lo:hi])
+            good = [i for i, a in enumerate(answers) if a.recommendation is not None]
+            if good:
+                labels = encode([answers[i].recommendation for i in good])
+                dataset.add(student.teacher, feats[lo:hi][good], labels, f"distill:{out}")
+            asked, ok = hi, ok + len(good)
+            if progress is not None:
+                progress(asked, len(prompts))
+            if asked >= 50 and ok / asked < 0.5:
+                raise UserError(
+                    f"teacher {advisor.label}: only {ok} of {asked} answers parsed; "
+                    "check the model and the prompt variant (pirl advise shows one answer)"
+                )
+        student.pull(dataset)
+        score = student.fit(fit_steps)
+    finally:
+        advisor.close()
+    record = {
+        "label": f"student of {advisor.label}",
+        "teacher": student.teacher,
+        "teacher_label": advisor.label,
+        "states_asked": len(prompts),
+        "answers_ok": ok,
+        "policies": list(policies),
+        "seed": seed,
+        "dataset": str(dataset_path(cfg)),
+        "dataset_size": student.dataset_size,
+        "agreement": score.agreement,
+        "majority": score.majority,
+        "heldout": score.heldout,
+        "per_field": score.per_field,
+        "fit_steps": fit_steps,
+        "prompt_variant": cfg.pare.prompt_variant,
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    tmp = out.with_name(out.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)  # a copy left by a killed earlier attempt
+    tmp.mkdir(parents=True)
+    student.save(tmp / "student.pt")
+    (tmp / "student.json").write_text(json.dumps(record, indent=2))
+    os.replace(tmp, out)
+    return record
+
+
+__all__ = ["collect_states", "distill"]
