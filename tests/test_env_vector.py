@@ -82,6 +82,7 @@ def test_reset_mask_resets_only_the_masked_worlds():
     env.step(np.array([0, 0, 0]))
     obs, info = env.reset(options={"reset_mask": np.array([False, True, False])})
     assert list(info["steps"]) == [1, 0, 1]
+    assert list(info["_steps"]) == [False, True, False]  # the info is about the reset world
     with pytest.raises(ValueError, match="reset_mask"):
         env.reset(options={"reset_mask": np.array([1, 0, 1])})
 

@@ -84,16 +84,18 @@ class InfoSnapshot:
             info[key] = build(e)
         return info
 
-    def vector_info(self) -> dict[str, Any]:
+    def vector_info(self, worlds: np.ndarray | None = None) -> dict[str, Any]:
         """Every world's info as Gymnasium's vector envs give it: a dict of arrays (first axis
-        = world), each key ``k`` with a boolean mask ``_k`` of the worlds that have it."""
+        = world), each key ``k`` with a boolean mask ``_k`` of the worlds that have it (those
+        in the boolean mask ``worlds``, default all)."""
         n = self.ints.shape[0]
         r, f = self.ints, self.flags
         out: dict[str, Any] = {}
+        every = np.ones(n, dtype=np.bool_) if worlds is None else np.asarray(worlds, np.bool_)
 
         def put(into: dict[str, Any], key: str, value: Any, mask: np.ndarray | None = None) -> None:
             into[key] = value
-            into["_" + key] = np.ones(n, dtype=np.bool_) if mask is None else mask
+            into["_" + key] = every.copy() if mask is None else mask
 
         for key, table in (("reward_terms", self.terms), ("reward_weights", self.weights)):
             inner: dict[str, Any] = {}
@@ -114,14 +116,15 @@ class InfoSnapshot:
         camera[:, 2] /= 10.0
         put(out, "camera", camera)
         put(out, "steps", r[:, D.STEPS].copy())
-        if self.metrics:
+        ended = {e: m for e, m in self.metrics.items() if every[e]}
+        if ended:
             mask = np.zeros(n, dtype=np.bool_)
-            mask[list(self.metrics)] = True
-            names = next(iter(self.metrics.values())).keys()
+            mask[list(ended)] = True
+            names = next(iter(ended.values())).keys()
             metrics: dict[str, Any] = {}
             for name in names:
                 column = np.zeros(n, dtype=np.float64)
-                for e, values in self.metrics.items():
+                for e, values in ended.items():
                     column[e] = values[name]
                 put(metrics, name, column, mask.copy())
             put(out, "episode_metrics", metrics, mask)
@@ -272,10 +275,11 @@ class LazyVectorInfo(LazyInfo):
     """The info of a Gymnasium vector env step (:meth:`InfoSnapshot.vector_info`), built on
     first read: one object per step, so a training loop that never reads it pays nothing."""
 
-    __slots__ = ()
+    __slots__ = ("_worlds",)
 
-    def __init__(self, snap: InfoSnapshot) -> None:
+    def __init__(self, snap: InfoSnapshot, worlds: np.ndarray | None = None) -> None:
         super().__init__(snap, -1)
+        self._worlds = worlds
 
     def _lazy(self, key: Any) -> bool:
         snap = self._snap
@@ -285,4 +289,4 @@ class LazyVectorInfo(LazyInfo):
         return name in INFO_KEYS or name in snap.extras
 
     def _build(self, snap: InfoSnapshot) -> dict[str, Any]:
-        return snap.vector_info()
+        return snap.vector_info(self._worlds)

@@ -113,8 +113,8 @@ class VCPPVectorEnv(VectorEnv):
             self._paths[e] = [self.world.position(int(e))]
         self._autoreset[mask] = False
         self._n_autoreset = int(self._autoreset.sum())
-        infos = self.core.infos_snapshot()
-        return self._obs(), LazyVectorInfo(infos)
+        # Like SyncVectorEnv: the info covers (masks in) the worlds that were reset.
+        return self._obs(), LazyVectorInfo(self.core.infos_snapshot(), mask.copy())
 
     def step(
         self, actions: np.ndarray
