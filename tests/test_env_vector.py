@@ -103,3 +103,12 @@ def test_render_gives_one_picture_per_world():
     env.step(np.array([0, 2]))
     frames = env.render()
     assert len(frames) == 2 and frames[0].ndim == 3
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_an_action_out_of_range_is_refused_before_any_world_moves(parallel):
+    env = VCPPVectorEnv(4, parallel=parallel, **SMALL)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"\[0, 12\)"):
+        env.step(np.array([0, 1, 12, 3]))
+    assert (env.world.ints[:, 6] == 0).all()  # STEPS: nothing was stepped
