@@ -4,19 +4,23 @@ Prints, in one run on the same machine:
 
 1. PPO training steps/s on 15x15x3 with ``make_vec_env`` (batched numpy worlds) against SB3's
    ``DummyVecEnv`` and ``SubprocVecEnv`` over single ``VCPPEnv``s (same PPO settings);
-2. PIRL (PARE with an advisor, async by default) against PPO-EWRI;
+2. PIRL (PARE with an advisor, student mode by default: a distilled advisor answers every
+   step, the teacher is asked in the background; its dataset starts empty here) against
+   PPO-EWRI, with the teacher calls per env-step, the staleness of shaped steps and the
+   student's agreement;
 3. where the time goes, per phase, as PufferLib's trainer prints it: env step (inside the
    VecEnv, advice excluded), policy forward (the rollout's ``policy(obs)`` calls), PPO update
    (``train()``), advisor (PARE waiting for answers) and the rest (rollout buffer, tensor
    copies, callbacks), in seconds and as a share of wall time.
 
 Usage: ``python benchmarks/train_throughput.py [--steps 16384] [--envs 16]
-[--advisor local|oracle] [--mode async|sync]``.
+[--advisor local|oracle] [--mode student|async|sync]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 
 import numpy as np
@@ -26,6 +30,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvW
 
 from pirl.advice.factory import make_advisor
 from pirl.agents.config import RunConfig
+from pirl.agents.pirl_advice import build_pirl_advice
 from pirl.agents.train import build_env_stack, build_ppo
 from pirl.env import VCPPEnv, make_vec_env
 
@@ -109,13 +114,15 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=16_384)
     parser.add_argument("--envs", type=int, default=16)
     parser.add_argument("--advisor", default="local", choices=("local", "oracle"))
-    parser.add_argument("--mode", default="async", choices=("async", "sync"))
+    parser.add_argument("--mode", default="student", choices=("student", "async", "sync"))
     parser.add_argument("--config", default="configs/quick.yaml")
     parser.add_argument("--no-pirl", action="store_true", help="skip the PIRL case")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    dataset = tempfile.mkdtemp(prefix="pirl-bench-") + "/student.sqlite"
     cfg = RunConfig.from_yaml(args.config).with_overrides(
-        ppo={"n_envs": args.envs}, pare={"advisor": args.advisor, "mode": args.mode}
+        ppo={"n_envs": args.envs},
+        pare={"advisor": args.advisor, "mode": args.mode, "student_dataset": dataset},
     )
     env_cfg = cfg.env.replace(reward="ewri")
     # Warm-up (torch and SB3 first-call costs), not reported.
@@ -141,7 +148,8 @@ def main() -> None:
     stats = None
     if not args.no_pirl:
         advisor = make_advisor(args.advisor, cfg, cache=False)  # cold: every prompt reaches the LLM
-        stack = build_env_stack("pirl", cfg, seed=0, advisor=advisor)
+        advice = build_pirl_advice(cfg, advisor, probe=False)
+        stack = build_env_stack("pirl", cfg, seed=0, advice=advice)
         rows.append(
             run_case(f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare)
         )
@@ -158,12 +166,21 @@ def main() -> None:
     if stats is None:
         return
     print(f"PIRL / PPO-EWRI (make_vec_env): {rows[3]['sps'] / base:.0%}")
+    print(f"PIRL label: {stats['label']}")
     print(
         "PIRL advice: "
-        f"{stats['prompts_sent']} prompts in {stats['batches_sent']} batches, "
-        f"shaped steps fresh {stats['steps_fresh']}, stale {stats['steps_stale']}, "
-        f"missing {stats['steps_missing']}, mean staleness {stats['mean_staleness']:.1f}"
+        f"teacher calls {stats['teacher_calls']} ({stats['teacher_calls_per_step']:.4f} per "
+        f"env-step), steps shaped by the student {stats['steps_student']}, by the teacher "
+        f"{stats['steps_teacher']} (fresh {stats['steps_fresh']}, stale {stats['steps_stale']}),"
+        f" unshaped {stats['steps_unshaped']}, mean staleness {stats['mean_staleness']:.1f}"
     )
+    if args.mode == "student":
+        print(
+            f"student: agreement {stats['student_agreement']:.3f} (majority "
+            f"{stats['student_majority']:.3f}) on {stats['student_heldout']} held-out answers, "
+            f"dataset {stats['student_dataset_size']}, gate passed at step "
+            f"{stats['gate_passed_at_step']}"
+        )
 
 
 if __name__ == "__main__":

@@ -22,32 +22,21 @@ def make_advisor(name: str, cfg: Any, cache: bool | None = None) -> Advisor:
     answers cost nothing. The oracle is not an LLM: it is neither cached nor budgeted (its
     answer depends on the map, which the prompt does not hold).
     """
-    from pirl.world.config import ConfigError
+    from pirl.world.config import ConfigError, UserError
 
-    a, p = cfg.advisor, cfg.pare
+    p = cfg.pare
     if name == "oracle":
         from pirl.advice.oracle import OracleAdvisor
 
         return OracleAdvisor()
-    if name == "local":
-        from pirl.advice.local import LocalAdvisor
-
-        advisor: Advisor = LocalAdvisor(
-            a.local_model or None, num_threads=a.local_threads, batch_size=a.local_batch_size
-        )
-    elif name == "openai":
-        from pirl.advice.openai_advisor import OpenAIAdvisor
-
-        advisor = OpenAIAdvisor(
-            a.openai_model,
-            base_url=a.openai_base_url or None,
-            api_key_env=a.openai_api_key_env,
-            timeout_s=a.openai_timeout_s,
-            max_retries=a.openai_max_retries,
-            concurrency=a.openai_concurrency,
-        )
-    else:
+    if name not in ("local", "openai"):
         raise ConfigError(f"advisor {name!r}: allowed values are local, openai, oracle")
+    try:
+        advisor = _backend(name, cfg)
+    except (ValueError, OSError) as exc:
+        # A missing key, model folder or model file: the user's to fix, said in one line.
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UserError(f"advisor {name}: {first}") from None
     if p.budget_calls or p.budget_tokens:
         from pirl.advice.budget import Budget, BudgetedAdvisor
 
@@ -58,6 +47,26 @@ def make_advisor(name: str, cfg: Any, cache: bool | None = None) -> Advisor:
 
         advisor = CachedAdvisor(advisor, p.cache_path or default_cache_path())
     return advisor
+
+
+def _backend(name: str, cfg: Any) -> Advisor:
+    a = cfg.advisor
+    if name == "local":
+        from pirl.advice.local import LocalAdvisor
+
+        return LocalAdvisor(
+            a.local_model or None, num_threads=a.local_threads, batch_size=a.local_batch_size
+        )
+    from pirl.advice.openai_advisor import OpenAIAdvisor
+
+    return OpenAIAdvisor(
+        a.openai_model,
+        base_url=a.openai_base_url or None,
+        api_key_env=a.openai_api_key_env,
+        timeout_s=a.openai_timeout_s,
+        max_retries=a.openai_max_retries,
+        concurrency=a.openai_concurrency,
+    )
 
 
 def exhausted(advisor: Any) -> bool:
