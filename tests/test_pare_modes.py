@@ -333,3 +333,43 @@ def test_resume_is_exact(tmp_path, mode):
     sb = json.loads((first / "advisor_stats.json").read_text())
     for key in ("steps", "steps_student", "steps_fresh", "steps_unshaped", "teacher_calls"):
         assert sa[key] == sb[key], key
+
+
+def test_distill_then_train_from_the_student(tmp_path):
+    env = {**__import__("os").environ, "PIRL_CACHE_DIR": str(tmp_path / "cache")}
+    student = tmp_path / "students" / "oracle"
+    cmd = [sys.executable, "-m", "pirl"]
+    made = subprocess.run(
+        [*cmd, "distill", "--teacher", "oracle", "--states", "150", "--config", "test",
+         "--fit-steps", "200", "--out", str(student)],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    record = json.loads((student / "student.json").read_text())
+    assert record["states_asked"] == 150 and record["dataset_size"] == 150
+    assert record["label"] == "student of oracle (not an LLM)"
+    assert 0 < record["majority"] <= 1 and record["agreement"] > 0
+    again = subprocess.run(
+        [*cmd, "distill", "--teacher", "oracle", "--states", "10", "--config", "test", "--out",
+         str(student)],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert again.returncode == 2 and "already exists" in again.stderr
+
+    cfg = tmp_path / "student.yaml"
+    data = RunConfig.from_yaml(TEST_CFG).to_dict()
+    data["pare"].update(advisor="oracle", mode="student", student_gate=0.0)
+    import yaml
+
+    cfg.write_text(yaml.safe_dump(data))
+    out = tmp_path / "run"
+    trained = subprocess.run(
+        [*cmd, "train", "--method", "pirl", "--config", str(cfg), "--student", str(student),
+         "--out", str(out)],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    stats = json.loads((out / "advisor_stats.json").read_text())
+    # A student with enough held-out answers shapes from the first step.
+    assert stats["steps_unshaped"] == 0 and stats["steps_student"] == stats["steps"]
+    assert json.loads((out / "meta.json").read_text())["student_from"] == str(student)

@@ -155,6 +155,7 @@ class PareStats:
     student_agreement: float = 0.0
     student_majority: float = 0.0
     student_heldout: int = 0
+    student_per_field: dict[str, float] = field(default_factory=dict)
     student_dataset_size: int = 0
     student_refits: int = 0
     gate_passed_at_step: int = -1
@@ -314,6 +315,7 @@ class PAREVecEnv(VecEnvWrapper):
         score, st = self.student.score, self.stats
         st.student_agreement, st.student_majority = score.agreement, score.majority
         st.student_heldout, st.student_dataset_size = score.heldout, self.student.dataset_size
+        st.student_per_field = dict(score.per_field)
         if st.gate_passed_at_step < 0 and self.student.passes(self.gate):
             st.gate_passed_at_step = st.steps
 
