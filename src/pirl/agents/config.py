@@ -181,6 +181,19 @@ class ReproduceSettings:
     """Evaluation worker processes."""
     gif_every: int = 2
     """Record every n-th frame of the report's animations."""
+    methods: tuple[str, ...] = ("ppo-sr", "ppo-ewri", "pirl", "il")
+    """Methods trained per seed (il needs ppo-ewri; pirl trains once per pirl_variants entry)."""
+    builtins: tuple[str, ...] = ("llm-only", "boustrophedon", "random")
+    """Methods evaluated without training."""
+    pirl_variants: tuple[Any, ...] = ()
+    """PIRL configurations, each a mapping of pare overrides (e.g. {advisor: oracle, lam_cam:
+    4}); empty = one PIRL with the preset's pare section and --advisor."""
+    acts: tuple[str, ...] = ("stochastic", "greedy")
+    """How trained policies act in evaluation (both are reported)."""
+    headline_act: str = "stochastic"
+    """The mode of the report's first table and figure, the same for every learned method."""
+    train_workers: int = 0
+    """Training runs at once, each a process with one torch and one numba thread (0 = cores)."""
 
 
 _SECTIONS = {

@@ -24,8 +24,69 @@ LABELS = {
 }
 
 
-class PPOPolicy(Policy):
-    """A trained Stable-Baselines3 PPO model acting deterministically."""
+ACT_MODES = ("stochastic", "greedy")
+# A salt so the action stream of a scenario differs from the stream that drew the scenario.
+_ACT_SALT = 0x5EED
+
+
+def act_rng(scenario_seed: int | None) -> np.random.Generator:
+    """The generator that samples a stochastic policy's actions in one scenario: seeded by the
+    scenario alone, so a re-run (and the batched runner) draws the same actions."""
+    return np.random.default_rng(None if scenario_seed is None else [scenario_seed, _ACT_SALT])
+
+
+def check_act(mode: str) -> str:
+    if mode not in ACT_MODES:
+        raise ConfigError(f"--act {mode!r}: allowed values are stochastic, greedy, both")
+    return mode
+
+
+class LearnedPolicy(Policy):
+    """A trained policy with action probabilities, acting ``greedy`` (the most likely action)
+    or ``stochastic`` (sampled, seeded per scenario by :func:`act_rng`).
+
+    ``act_batch`` chooses for many worlds at once with one forward pass; ``act`` is the batch
+    of one, so the batched and the per-episode runner choose the same actions.
+    """
+
+    act_mode = "greedy"
+    _rng: np.random.Generator | None = None
+
+    def set_act(self, mode: str) -> LearnedPolicy:
+        self.act_mode = check_act(mode)
+        return self
+
+    def reset(self, world: Any, index: int = 0, seed: int | None = None) -> None:
+        self._rng = act_rng(seed)
+
+    def probabilities(self, obs: np.ndarray) -> np.ndarray:
+        """Action probabilities, shape (batch, N_ACTIONS)."""
+        raise NotImplementedError
+
+    def act_batch(self, obs: np.ndarray, rngs: list[np.random.Generator] | None) -> np.ndarray:
+        probs = self.probabilities(np.asarray(obs, dtype=np.float32))
+        if self.act_mode == "greedy":
+            return probs.argmax(axis=1)
+        if rngs is None:
+            raise ValueError("stochastic acting needs one generator per world")
+        return sample_actions(probs, rngs)
+
+    def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
+        if self._rng is None:
+            self._rng = act_rng(None)
+        return int(self.act_batch(np.asarray(obs)[None], [self._rng])[0])
+
+
+def sample_actions(probs: np.ndarray, rngs: list[np.random.Generator]) -> np.ndarray:
+    """One action per row of ``probs``, each drawn with its row's generator (one uniform each)."""
+    cdf = np.cumsum(np.asarray(probs, dtype=np.float64), axis=1)
+    u = np.array([rng.random() for rng in rngs]) * cdf[:, -1]
+    actions = (cdf <= u[:, None]).sum(axis=1)
+    return np.minimum(actions, probs.shape[1] - 1)
+
+
+class PPOPolicy(LearnedPolicy):
+    """A trained Stable-Baselines3 PPO model (greedy unless :meth:`set_act` says otherwise)."""
 
     def __init__(self, model_path: Path, name: str, device: str = "cpu") -> None:
         from stable_baselines3 import PPO
@@ -37,13 +98,18 @@ class PPOPolicy(Policy):
         self.name = name
         self.label = LABELS.get(name, name)
 
-    def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        action, _ = self.model.predict(obs, deterministic=True)
-        return int(action)
+    def probabilities(self, obs: np.ndarray) -> np.ndarray:
+        import torch
+
+        policy = self.model.policy
+        with torch.no_grad():
+            tensor = torch.as_tensor(obs, device=policy.device)
+            dist = policy.get_distribution(tensor).distribution
+            return dist.probs.cpu().numpy()
 
 
-class TabNetPolicy(Policy):
-    """The imitation-learning TabNet classifier, choosing its most likely action."""
+class TabNetPolicy(LearnedPolicy):
+    """The imitation-learning TabNet classifier (greedy: its most likely action)."""
 
     name = "il"
     label = "IL"
@@ -57,8 +123,15 @@ class TabNetPolicy(Policy):
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
             raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
 
-    def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
-        return int(self.model.predict(np.asarray(obs, dtype=np.float32)[None])[0])
+    def probabilities(self, obs: np.ndarray) -> np.ndarray:
+        from pirl.world.dynamics import N_ACTIONS
+
+        proba = self.model.predict_proba(obs)
+        # Columns follow the classes the expert showed; actions it never took get 0.
+        classes = [int(self.model.preds_mapper[str(k)]) for k in range(proba.shape[1])]
+        full = np.zeros((proba.shape[0], N_ACTIONS), dtype=np.float64)
+        full[:, classes] = proba
+        return full
 
 
 _RETRAIN = "train the run again into a new --out (or restore the file from a copy)"
@@ -113,12 +186,14 @@ def load_policy(
     device: str = "cpu",
     max_calls: int = 0,
     prompt_variant: str = "paper",
+    act: str = "greedy",
 ) -> Policy:
     """A policy from a run folder (PPO methods, IL) or a built-in method name.
 
     Built-ins: ``boustrophedon``, ``random`` and ``llm-only`` (which needs ``advisor``;
     ``max_calls`` limits its LLM calls per episode, 0 = no limit; ``prompt_variant`` picks
-    the prompt).
+    the prompt). ``act`` (greedy or stochastic) sets how a trained policy acts; built-ins
+    act by their own rule whatever it says.
     """
     if str(source) in BUILTIN:
         name = str(source)
@@ -139,5 +214,5 @@ def load_policy(
     method = run_method(run)
     model = model_file(run)
     if method == "il":
-        return TabNetPolicy(model)
-    return PPOPolicy(model, method, device)
+        return TabNetPolicy(model).set_act(act)
+    return PPOPolicy(model, method, device).set_act(act)

@@ -55,17 +55,52 @@ HIGHER_IS_BETTER = {"vcr": True, "be": True, "rvc": False}
 SIM_TITLES = {"grid": "Table 1: grid simulator", "physics": "Table 2: physics simulator"}
 
 
-def _cell(row: dict[str, Any], metric: str) -> str:
-    mean, half = row[f"{metric}_mean"], row[f"{metric}_ci95"]
-    return f"{mean:.2f} ± {half:.2f}" if not math.isnan(half) else f"{mean:.2f}"
+ACT_NOTE = {
+    "stochastic": "trained policies sample their actions (seeded per scenario)",
+    "greedy": "trained policies take their most likely action",
+}
 
 
-def markdown_tables(rows: list[dict[str, Any]]) -> str:
-    """Tables in the paper's layout: our mean ± 95% CI with the paper's value beside it.
+def _cell(row: dict[str, Any], metric: str, stat: str = "iqm") -> str:
+    """``IQM [lo, hi]`` over runs (seeds), or ``mean ± per-episode CI`` for ``stat="episode"``."""
+    if stat == "episode":
+        mean, half = row[f"{metric}_mean"], row[f"{metric}_ci95"]
+        return f"{mean:.2f} ± {half:.2f}" if not math.isnan(half) else f"{mean:.2f}"
+    value = row.get(f"{metric}_{stat}", row[f"{metric}_mean"])
+    lo, hi = row.get(f"{metric}_{stat}_lo", math.nan), row.get(f"{metric}_{stat}_hi", math.nan)
+    if math.isnan(lo) or int(row.get("seeds", 1)) < 2:
+        return f"{value:.2f}"
+    return f"{value:.2f} [{lo:.2f}, {hi:.2f}]"
 
-    The best of the paper's five methods per column is bold; extras (planner, oracle-advised
-    PIRL, random) follow under a rule and are not ranked.
+
+def acts_of(rows: list[dict[str, Any]], headline: str = "stochastic") -> list[str]:
+    """The act modes of trained policies in ``rows``, the headline mode first."""
+    acts = sorted({r.get("act", "greedy") for r in rows} - {"fixed"})
+    return sorted(acts, key=lambda a: a != headline) or ["fixed"]
+
+
+def _act_rows(rows: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
+    """Rows of one act mode, with the built-ins (act ``fixed``), which act the same in both."""
+    return [r for r in rows if r.get("act", "greedy") in (act, "fixed")]
+
+
+def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: str = "iqm") -> str:
+    """Tables in the paper's layout for one act mode, the paper's value beside ours.
+
+    ``stat="iqm"``: IQM over training seeds with its stratified bootstrap 95% interval;
+    ``stat="episode"``: the mean over all episodes ± the per-episode 95% CI (the spread over
+    scenarios, seeds pooled). The best of the paper's five methods per column is bold; extras
+    (planner, oracle-advised PIRL, PIRL variants, random) follow under a rule and are not
+    ranked.
     """
+    act = act or acts_of(rows)[0]
+    rows = _act_rows(rows, act)
+    what = (
+        "IQM over training seeds [stratified bootstrap 95% interval]"
+        if stat == "iqm"
+        else "mean over episodes ± 95% CI over episodes"
+    )
+    key = "iqm" if stat == "iqm" else "mean"
     parts = []
     for sim in ("grid", "physics"):
         sim_rows = [r for r in rows if r["sim"] == sim]
@@ -74,24 +109,24 @@ def markdown_tables(rows: list[dict[str, Any]]) -> str:
         sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
         by = {(r["method"], r["size"]): r for r in sim_rows}
         methods = [m for m in PAPER_METHODS if any((m, s) in by for s in sizes)]
-        extras = sorted({r["method"] for r in sim_rows} - set(PAPER_METHODS))
+        extras = sorted({r["method"] for r in sim_rows} - set(PAPER_METHODS), key=_method_order)
         best: dict[tuple[str, str], float] = {}
         for size in sizes:
             for metric in METRICS:
-                values = [by[(m, size)][f"{metric}_mean"] for m in methods if (m, size) in by]
+                values = [by[(m, size)][f"{metric}_{key}"] for m in methods if (m, size) in by]
                 if values:
                     pick = max if HIGHER_IS_BETTER[metric] else min
                     best[(size, metric)] = pick(values)
-        head = ["method"] + [f"{s} {m.upper()}" for s in sizes for m in METRICS]
+        head = ["method", "seeds"] + [f"{s} {m.upper()}" for s in sizes for m in METRICS]
         lines = [
-            f"### {SIM_TITLES[sim]} (ours: mean ± 95% CI; paper in brackets)",
+            f"### {SIM_TITLES[sim]}, act {act} (ours: {what}; paper in brackets)",
             "",
             "| " + " | ".join(head) + " |",
             "|" + "---|" * len(head),
         ]
         for method in methods + extras:
-            label = next((by[(method, s)]["label"] for s in sizes if (method, s) in by), method)
-            cells = [label]
+            first = next(by[(method, s)] for s in sizes if (method, s) in by)
+            cells = [first["label"], str(int(first.get("seeds", 1)))]
             for size in sizes:
                 row = by.get((method, size))
                 paper = PAPER.get(sim, {}).get(method, {}).get(size)
@@ -99,8 +134,8 @@ def markdown_tables(rows: list[dict[str, Any]]) -> str:
                     if row is None:
                         cells.append("—")
                         continue
-                    text = _cell(row, metric)
-                    if method in PAPER_METHODS and row[f"{metric}_mean"] == best.get(
+                    text = _cell(row, metric, stat)
+                    if method in PAPER_METHODS and row[f"{metric}_{key}"] == best.get(
                         (size, metric)
                     ):
                         text = f"**{text}**"
@@ -111,19 +146,148 @@ def markdown_tables(rows: list[dict[str, Any]]) -> str:
                 lines.append("| *extras, not in the paper* |" + " |" * (len(head) - 1))
             lines.append("| " + " | ".join(cells) + " |")
         n = sorted({int(r["n"]) for r in sim_rows})
-        lines += ["", f"Episodes per cell: {', '.join(map(str, n))}.", ""]
+        lines += [
+            "",
+            f"Act {act}: {ACT_NOTE.get(act, act)}; planners, LLM-only and random act by their "
+            f"own rule (act fixed: the same episodes in every act table, one run). Episodes per "
+            f"cell (all seeds): {', '.join(map(str, n))}.",
+            "",
+        ]
         parts.append("\n".join(lines))
     return "\n".join(parts)
 
 
-def bar_figure(rows: list[dict[str, Any]], path: Path, sim: str = "grid") -> Path:
-    """Grouped bars of VCR, BE and RVC per method and size, with 95% CI error bars."""
+CAMERA = (
+    ("camera_share", "camera actions"), ("mean_footprint", "mean footprint (cells)"),
+    ("final_tilt", "final tilt (deg)"), ("final_zoom", "final zoom"), ("steps", "steps"),
+)  # fmt: skip
+
+
+def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
+    """Camera use beside coverage: per method, size and act mode, the share of camera
+    actions, mean footprint, final tilt and zoom, steps, and VCR per step."""
+    sim_rows = [r for r in rows if r["sim"] == sim]
+    if not sim_rows:
+        return ""
+    head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
+    head.append("VCR per 100 steps")
+    lines = [
+        f"### Camera use ({sim} simulator; means over episodes)",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    order = sorted(
+        sim_rows,
+        key=lambda r: (
+            _method_order(r["method"]), r["label"], r.get("act", ""),
+            [int(v) for v in r["size"].split("x")],
+        ),
+    )  # fmt: skip
+    for r in order:
+        cells = [r["label"], r.get("act", ""), r["size"], _cell(r, "vcr")]
+        cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
+        steps = r.get("steps_mean", math.nan)
+        cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def improvement_table(records: list[dict[str, Any]], act: str) -> str:
+    """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
+    with the stratified bootstrap 95% interval (rliable)."""
+    from pirl.evaluate.summary import probability_of_improvement, seed_scores
+
+    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+    labels: dict[str, str] = {}
+    for r in records:
+        if r.get("act", "greedy") not in (act, "fixed"):
+            continue
+        groups.setdefault((r["method"], r["sim"], r["size"]), []).append(r)
+        labels[r["method"]] = r.get("label", r["method"])
+    pirls = sorted({m for m, _, _ in groups if m.startswith("pirl")}, key=_method_order)
+    others = sorted({m for m, _, _ in groups if not m.startswith("pirl")}, key=_method_order)
+    if not pirls or not others:
+        return ""
+    lines = [
+        f"### Probability of improvement in VCR (act {act}; runs = training seeds)",
+        "",
+        "P(a run of the row's PIRL scores a higher mean VCR than a run of the column's "
+        "method) [stratified bootstrap 95% interval]; 0.5 = no difference.",
+        "",
+        "| PIRL | sim | size | " + " | ".join(labels[o] for o in others) + " |",
+        "|" + "---|" * (3 + len(others)),
+    ]
+    keys = sorted(
+        {(s, z) for _, s, z in groups}, key=lambda k: (k[0], [int(v) for v in k[1].split("x")])
+    )
+    for pirl in pirls:
+        for sim, size in keys:
+            if (pirl, sim, size) not in groups:
+                continue
+            x = seed_scores(groups[(pirl, sim, size)], "vcr")
+            cells = [labels[pirl], sim, size]
+            for other in others:
+                if (other, sim, size) not in groups:
+                    cells.append("—")
+                    continue
+                y = seed_scores(groups[(other, sim, size)], "vcr")
+                p, lo, hi = probability_of_improvement(x, y)
+                cells.append(f"{p:.2f} [{lo:.2f}, {hi:.2f}]")
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str = "grid") -> Path:
+    """Aggregate intervals: per size, each method's VCR IQM over seeds with its stratified
+    bootstrap 95% interval (the rliable style), for one act mode."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sim_rows = [r for r in rows if r["sim"] == sim]
+    sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
+    sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
+    methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
+    labels = {r["method"]: f"{r['label']} ({int(r.get('seeds', 1))} seeds)" for r in sim_rows}
+    by = {(r["method"], r["size"]): r for r in sim_rows}
+    fig, axes = plt.subplots(
+        1, max(1, len(sizes)), figsize=(4.2 * max(1, len(sizes)) + 3, 0.45 * len(methods) + 1.6),
+        sharey=True, squeeze=False,
+    )  # fmt: skip
+    for ax, size in zip(axes[0], sizes, strict=False):
+        for k, method in enumerate(methods):
+            row = by.get((method, size))
+            if row is None:
+                continue
+            iqm = row.get("vcr_iqm", row["vcr_mean"])
+            lo, hi = row.get("vcr_iqm_lo", iqm), row.get("vcr_iqm_hi", iqm)
+            ax.plot([lo, hi], [k, k], lw=6, alpha=0.5, color=f"C{k % 10}")
+            ax.plot([iqm], [k], "|", ms=14, mew=2, color="k")
+        ax.set_title(size)
+        ax.set_xlim(0, 1.02)
+        ax.set_xlabel("VCR (IQM over seeds)")
+        ax.grid(axis="x", alpha=0.3)
+    axes[0][0].set_yticks(range(len(methods)), [labels[m] for m in methods], fontsize=8)
+    fig.suptitle(f"{sim} simulator, act {act}: IQM with stratified bootstrap 95% intervals")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def bar_figure(
+    rows: list[dict[str, Any]], path: Path, sim: str = "grid", act: str | None = None
+) -> Path:
+    """Grouped bars of VCR, BE and RVC per method and size for one act mode, with per-episode
+    95% CI error bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    act = act or acts_of(rows)[0]
+    sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
     sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
     methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
     labels = {r["method"]: r["label"] for r in sim_rows}
@@ -144,7 +308,7 @@ def bar_figure(rows: list[dict[str, Any]], path: Path, sim: str = "grid") -> Pat
         ax.set_ylim(0, 1.05)
     handles, names = axes[0].get_legend_handles_labels()
     fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), fontsize=8)
-    fig.suptitle(f"{sim} simulator: mean ± 95% CI")
+    fig.suptitle(f"{sim} simulator, act {act}: mean over episodes ± 95% CI over episodes")
     rows_of_legend = math.ceil(len(names) / 4)
     fig.tight_layout(rect=(0, 0.06 * rows_of_legend, 1, 1))
     fig.savefig(path, dpi=110)
@@ -218,6 +382,8 @@ def _md_table_to_html(markdown: str) -> str:
             flush()
             if line.startswith("### "):
                 out.append(f"<h3>{html.escape(line[4:])}</h3>")
+            elif line.startswith("## "):
+                out.append(f"<h2>{html.escape(line[3:])}</h2>")
             elif line.strip():
                 out.append(f"<p>{html.escape(line)}</p>")
     flush()
@@ -241,15 +407,45 @@ def write_report(
     advisor_stats: dict[str, Any] | None = None,
     code_version: str = "unknown",
     notes: Sequence[str] = (),
+    headline_act: str = "stochastic",
 ) -> Path:
-    """Write table.md, figure.png, learning_curves.png and the self-contained report.html."""
+    """Write table.md, figure.png, intervals.png, learning_curves.png and report.html.
+
+    table.md holds, for the headline act mode first and then the other, the IQM tables over
+    seeds; then the probability of improvement of PIRL over each baseline (headline mode),
+    camera use, and the per-episode tables (the secondary spread).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     rows = read_summary(summary)
-    table = markdown_tables(rows)
+    acts = acts_of(rows, headline_act)
+    episodes_path = Path(summary).with_name("episodes.jsonl")
+    records = [json.loads(line) for line in episodes_path.open()] if episodes_path.is_file() else []
+    blocks = [markdown_tables(rows, act) for act in acts]
+    improvement = improvement_table(records, acts[0]) if records else ""
+    camera = camera_table(rows)
+    spread = [markdown_tables(rows, act, stat="episode") for act in acts]
+    table = "\n".join(
+        [
+            f"Headline act mode: {acts[0]} (the same for every trained method; see "
+            "docs/results.md).",
+            "",
+            *blocks,
+            improvement,
+            camera,
+            "## Secondary: spread over episodes",
+            "",
+            *spread,
+        ]
+    )
     (folder / "table.md").write_text(table + "\n")
-    figures = {"grid": bar_figure(rows, folder / "figure.png", "grid")}
+    figures = {"grid": bar_figure(rows, folder / "figure.png", "grid", acts[0])}
     if any(r["sim"] == "physics" for r in rows):
-        figures["physics"] = bar_figure(rows, folder / "figure_physics.png", "physics")
+        figures["physics"] = bar_figure(rows, folder / "figure_physics.png", "physics", acts[0])
+    intervals = {
+        act: interval_figure(rows, folder / f"intervals_{act}.png", act)
+        for act in acts
+        if any(r["sim"] == "grid" for r in rows)
+    }
     curves = learning_curves(runs, folder / "learning_curves.png")
 
     sections = [
@@ -259,8 +455,16 @@ def write_report(
         "<h2>Results</h2>",
         _md_table_to_html(table),
     ]
+    for act, path in intervals.items():
+        sections.append(
+            f"<h2>Aggregate intervals over seeds (grid, act {act})</h2>"
+            f"<img alt='intervals {act}' src='{_data_uri(path)}'>"
+        )
     for sim, path in figures.items():
-        sections.append(f"<h2>Figure ({sim})</h2><img alt='{sim} bars' src='{_data_uri(path)}'>")
+        sections.append(
+            f"<h2>Figure ({sim}, act {acts[0]}; per-episode spread)</h2>"
+            f"<img alt='{sim} bars' src='{_data_uri(path)}'>"
+        )
     sections.append(f"<h2>Learning curves</h2><img alt='curves' src='{_data_uri(curves)}'>")
     if gifs:
         sections.append("<h2>One episode per method (same 30x30x3 scenario)</h2><div class='g'>")

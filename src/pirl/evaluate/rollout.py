@@ -1,4 +1,5 @@
-"""Run one policy for one episode on a single environment, optionally recording frames."""
+"""Run a policy: one episode on a single environment (optionally recording frames), or many
+scenarios at once on the batched core with one policy forward per step."""
 
 from __future__ import annotations
 
@@ -8,8 +9,13 @@ from pathlib import Path
 import imageio.v2 as imageio
 import numpy as np
 
+from pirl.agents.loading import LearnedPolicy, act_rng
 from pirl.agents.policy import Policy
+from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
+from pirl.world import dynamics as D
+from pirl.world.config import VCPPConfig
+from pirl.world.metrics import episode_metrics
 
 
 @dataclass
@@ -37,6 +43,38 @@ def run_episode(
         if record and (done or step % frame_every == 0):
             frames.append(env.render())
     return EpisodeResult(seed, info["episode_metrics"], frames)
+
+
+def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[dict[str, float]]:
+    """Play every scenario of ``seeds`` at once: one batched world, one ``act_batch`` per step.
+
+    World ``i`` is reset exactly as ``VCPPEnv.reset(seed=seeds[i])`` resets (the same
+    generator), and its actions are drawn from :func:`~pirl.agents.loading.act_rng` of its
+    scenario, as :func:`run_episode` draws them, so the episode metrics equal the per-episode
+    runner's. A world whose episode has ended holds still (its metrics are already taken)
+    until the last one ends.
+    """
+    from gymnasium.utils import seeding
+
+    n = len(seeds)
+    core = EnvCore(cfg, n)
+    rngs = []
+    for e, seed in enumerate(seeds):
+        core.reset_world(e, seeding.np_random(int(seed))[0])
+        rngs.append(act_rng(int(seed)))
+    metrics: list[dict[str, float] | None] = [None] * n
+    active = np.ones(n, dtype=bool)
+    actions = np.zeros(n, dtype=np.int64)
+    while active.any():
+        live = np.flatnonzero(active)
+        actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live])
+        if core.step(actions):
+            flags = core.world.flags
+            ended = live[(flags[live, D.F_TERMINATED] | flags[live, D.F_TRUNCATED]) != 0]
+            for e in ended:
+                metrics[e] = episode_metrics(core.world, int(e))
+            active[ended] = False
+    return [m for m in metrics if m is not None]
 
 
 def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 12) -> Path:

@@ -1,8 +1,14 @@
 """Run every method on every scenario of every size, in parallel worker processes.
 
-``evaluate()`` is what ``pirl evaluate`` calls. Each (method, size) pair is cut into chunks of
-scenario seeds; a worker loads the method's policy once and plays its chunk. Records are
-sorted before writing, so the output does not depend on the number of workers.
+``evaluate()`` is what ``pirl evaluate`` calls. Each (method, size, act mode) is cut into
+chunks of scenario seeds; a worker loads the method's policy once and plays its chunk. On the
+grid a trained policy plays its whole chunk at once (one batched world, one policy forward
+per step); planners and the physics simulator play episode by episode. Records are sorted
+before writing, so the output depends neither on the number of workers nor on batching.
+
+Trained policies act ``stochastic`` (sampled, seeded per scenario) and/or ``greedy``; the
+built-ins (planners, LLM-only, random) act by their own rule and are played once, with act
+``fixed``.
 """
 
 from __future__ import annotations
@@ -18,12 +24,21 @@ from pathlib import Path
 from typing import Any
 
 from pirl.agents.config import RunConfig
-from pirl.agents.loading import BUILTIN, LABELS, model_file, run_meta
+from pirl.agents.loading import ACT_MODES, BUILTIN, LABELS, check_act, model_file, run_meta
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import write_summary
 from pirl.world.config import ConfigError, VCPPConfig
 
 SIMS = ("grid", "physics")
+FIXED = "fixed"  # the act of built-in methods: they act by their own rule in both modes
+
+
+def parse_acts(text: str | list[str]) -> list[str]:
+    """'both' -> both modes; 'greedy' -> ['greedy']; a list is checked as it is."""
+    words = [text] if isinstance(text, str) else list(text)
+    if words == ["both"]:
+        return list(ACT_MODES)
+    return [check_act(w) for w in words]
 
 
 @dataclass(frozen=True)
@@ -95,6 +110,10 @@ class EvalPlan:
     episodes_per_method: dict[str, int] = field(default_factory=dict)
     sim_sizes: dict[str, list[tuple[int, int, int]]] = field(default_factory=dict)
     sim_episodes: dict[str, int] = field(default_factory=dict)
+    acts: list[str] = field(default_factory=lambda: ["greedy"])
+    batched: bool = True
+    """Grid episodes of a trained policy run batched (one forward per step for all scenarios
+    of a chunk); False plays them one by one (the same results, slower)."""
 
 
 # -- worker side ---------------------------------------------------------------------------
@@ -144,13 +163,15 @@ def run_chunk(
     size: tuple[int, int, int],
     sim: str,
     seeds: list[int],
+    act: str = FIXED,
+    batched: bool = True,
 ) -> list[dict[str, Any]]:
-    """Play ``spec`` on each seed of ``size``; one record per episode."""
+    """Play ``spec`` on each seed of ``size`` acting ``act``; one record per episode."""
     import torch
 
     from pirl import _quiet
     from pirl.env.vcpp_env import VCPPEnv
-    from pirl.evaluate.rollout import run_episode
+    from pirl.evaluate.rollout import run_batch, run_episode
 
     _quiet.install()  # a worker process: no third-party banners or deprecation noise
     if sim == "physics":
@@ -159,11 +180,18 @@ def run_chunk(
     config = RunConfig.from_dict(config_dict)
     env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size))
     policy = _policy(spec, config)
-    env = VCPPEnv(env_cfg)
+    if act != FIXED:
+        policy.set_act(act)
     records = []
-    for seed in seeds:
+    batch: list[dict[str, float]] = []
+    if sim == "grid" and act != FIXED and batched:
+        batch = run_batch(env_cfg, policy, seeds)
+    env = VCPPEnv(env_cfg) if sim == "grid" and not batch else None
+    for k, seed in enumerate(seeds):
         calls_before = getattr(policy, "calls", 0)
-        if sim == "physics":
+        if batch:
+            metrics = batch[k]
+        elif sim == "physics":
             from pirl.physics import run_physics_episode
 
             metrics = run_physics_episode(env_cfg, policy, seed, config.physics)
@@ -174,6 +202,7 @@ def run_chunk(
                 "method": spec.key,
                 "label": spec.label,
                 "sim": sim,
+                "act": act,
                 "size": size_name(size),
                 "seed": seed,
                 "train_seed": spec.train_seed,
@@ -189,14 +218,19 @@ def run_chunk(
 def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
     tasks = []
     for spec in plan.specs:
-        for sim in plan.sims:
-            episodes = plan.sim_episodes.get(sim, plan.episodes)
-            episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
-            for size in plan.sim_sizes.get(sim, plan.sizes):
-                seeds = scenario_seeds(size, episodes)
-                chunk = max(1, math.ceil(len(seeds) / max(1, 2 * workers)))
-                for i in range(0, len(seeds), chunk):
-                    tasks.append((spec, size, sim, seeds[i : i + chunk]))
+        acts = [FIXED] if spec.source in BUILTIN else plan.acts
+        for act in acts:
+            for sim in plan.sims:
+                episodes = plan.sim_episodes.get(sim, plan.episodes)
+                episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
+                # A batched chunk is best large: one chunk per worker; else two per worker.
+                batched = plan.batched and sim == "grid" and act != FIXED
+                for size in plan.sim_sizes.get(sim, plan.sizes):
+                    seeds = scenario_seeds(size, episodes)
+                    parts = max(1, workers if batched else 2 * workers)
+                    chunk = max(1, math.ceil(len(seeds) / parts))
+                    for i in range(0, len(seeds), chunk):
+                        tasks.append((spec, size, sim, seeds[i : i + chunk], act))
     return tasks
 
 
@@ -213,6 +247,7 @@ def evaluate(
             raise ConfigError(f"--sim {sim!r}: available simulators are {', '.join(SIMS)}")
     if not plan.specs:
         raise ConfigError("nothing to evaluate: give --runs and/or --methods")
+    plan.acts = parse_acts(plan.acts)
     plan.specs = distinct_specs(plan.specs)
     _check_observations(plan)
     out = Path(out)
@@ -223,8 +258,8 @@ def evaluate(
     records: list[dict[str, Any]] = []
     done = 0
     if workers <= 1 and executor_factory is None:
-        for spec, size, sim, seeds in tasks:
-            records += run_chunk(spec, env_dict, config_dict, size, sim, seeds)
+        for spec, size, sim, seeds, act in tasks:
+            records += run_chunk(spec, env_dict, config_dict, size, sim, seeds, act, plan.batched)
             done += len(seeds)
             if progress:
                 progress(done, total)
@@ -232,15 +267,19 @@ def evaluate(
         factory = executor_factory or process_pool
         with factory(workers) as pool:
             futures = {
-                pool.submit(run_chunk, spec, env_dict, config_dict, size, sim, seeds): len(seeds)
-                for spec, size, sim, seeds in tasks
+                pool.submit(
+                    run_chunk, spec, env_dict, config_dict, size, sim, seeds, act, plan.batched
+                ): len(seeds)
+                for spec, size, sim, seeds, act in tasks
             }
             for future in as_completed(futures):
                 records += future.result()
                 done += futures[future]
                 if progress:
                     progress(done, total)
-    records.sort(key=lambda r: (r["method"], r["sim"], r["size"], str(r["source"]), r["seed"]))
+    records.sort(
+        key=lambda r: (r["method"], r["sim"], r["act"], r["size"], str(r["source"]), r["seed"])
+    )
     _write_jsonl(out / "episodes.jsonl", records)
     write_summary(records, out / "summary.csv")
     (out / "plan.json").write_text(
@@ -251,6 +290,7 @@ def evaluate(
                 "episodes": plan.episodes,
                 "episodes_per_method": plan.episodes_per_method,
                 "sims": plan.sims,
+                "acts": plan.acts,
                 "env": env_dict,
                 "physics": config_dict["physics"],
             },

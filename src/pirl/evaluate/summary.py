@@ -1,4 +1,12 @@
-"""Per method x simulator x size summaries: means with 95% confidence intervals."""
+"""Per method x simulator x size x act summaries, with training seeds as the unit.
+
+Each row's episodes are first averaged per training seed (a run); the seed-level scores are
+then aggregated with ``rliable``: mean and interquartile mean (IQM) with stratified bootstrap
+95% intervals over runs (``*_mean_lo/hi``, ``*_iqm``, ``*_iqm_lo/hi``, ``seeds`` runs). The
+per-episode mean and its Student-t 95% half-width (``*_mean``, ``*_ci95``) stay as the
+secondary spread. Built-in methods have no training seed: they count as one run, so their
+interval over runs is a point.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +22,8 @@ import numpy as np
 from scipy import stats
 
 HEADLINE = ("vcr", "be", "rvc")
+BOOTSTRAP_REPS = 1000
+POI_REPS = 1000
 OTHER = (
     "overlap", "views_per_cell", "steps", "collisions", "battery_left", "camera_share",
     "mean_footprint", "final_tilt", "final_zoom", "llm_calls",
@@ -21,9 +31,12 @@ OTHER = (
 COLUMNS = (
     ["method", "sim", "size", "n"]
     + [f"{m}_{s}" for m in HEADLINE for s in ("mean", "ci95")]
+    + ["act", "seeds"]
+    + [f"{m}_{s}" for m in HEADLINE for s in ("iqm", "iqm_lo", "iqm_hi", "mean_lo", "mean_hi")]
     + [f"{m}_mean" for m in OTHER]
     + ["label"]
 )
+TEXT_COLUMNS = ("method", "sim", "size", "act", "label")
 
 
 def mean_ci95(values: Iterable[float]) -> tuple[float, float]:
@@ -37,16 +50,74 @@ def mean_ci95(values: Iterable[float]) -> tuple[float, float]:
     return float(x.mean()), float(half)
 
 
+def seed_scores(group: list[dict[str, Any]], metric: str) -> np.ndarray:
+    """Per training seed, the mean of ``metric`` over its episodes: shape (seeds, 1), the
+    runs x tasks matrix rliable takes (one task: this row's size)."""
+    by_seed: dict[Any, list[float]] = defaultdict(list)
+    for r in group:
+        by_seed[r.get("train_seed")].append(float(r[metric]))
+    keys = sorted(by_seed, key=lambda s: (s is None, s))
+    return np.array([[np.mean(by_seed[k])] for k in keys], dtype=np.float64)
+
+
+def _quiet_rliable():
+    import warnings
+
+    warnings.filterwarnings("ignore", category=FutureWarning, module="arch")
+    from rliable import library, metrics
+
+    return library, metrics
+
+
+def interval_estimates(scores: np.ndarray, reps: int = BOOTSTRAP_REPS) -> dict[str, float]:
+    """Mean and IQM of a (runs, tasks) score matrix with stratified bootstrap 95% intervals
+    (rliable; fixed generator, so a summary is reproducible)."""
+    library, metrics = _quiet_rliable()
+
+    def both(x: np.ndarray) -> np.ndarray:
+        return np.array([metrics.aggregate_mean(x), metrics.aggregate_iqm(x)])
+
+    if scores.shape[0] == 1:  # one run: no spread over runs to resample
+        value = float(scores.mean())
+        return dict(mean=value, mean_lo=value, mean_hi=value, iqm=value, iqm_lo=value,
+                    iqm_hi=value)  # fmt: skip
+    point, ci = library.get_interval_estimates(
+        {"x": scores}, both, reps=reps, random_state=np.random.RandomState(0)
+    )
+    (mean, iqm), ((mean_lo, iqm_lo), (mean_hi, iqm_hi)) = point["x"], ci["x"]
+    return dict(mean=float(mean), mean_lo=float(mean_lo), mean_hi=float(mean_hi),
+                iqm=float(iqm), iqm_lo=float(iqm_lo), iqm_hi=float(iqm_hi))  # fmt: skip
+
+
+def probability_of_improvement(
+    x: np.ndarray, y: np.ndarray, reps: int = POI_REPS
+) -> tuple[float, float, float]:
+    """P(a run of X scores above a run of Y), with its stratified bootstrap 95% interval
+    (rliable). ``x`` and ``y`` are (runs, tasks) matrices over the same tasks."""
+    library, metrics = _quiet_rliable()
+    point, ci = library.get_interval_estimates(
+        {"xy": (x, y)}, metrics.probability_of_improvement, reps=reps,
+        random_state=np.random.RandomState(0),
+    )  # fmt: skip
+    return float(point["xy"]), float(ci["xy"][0]), float(ci["xy"][1])
+
+
 def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One row per (method, sim, size), in a stable order."""
-    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
+    """One row per (method, sim, size, act), in a stable order."""
+    groups: dict[tuple[str, str, str, str], list[dict[str, Any]]] = defaultdict(list)
     for r in records:
-        groups[(r["method"], r["sim"], r["size"])].append(r)
+        groups[(r["method"], r["sim"], r["size"], r.get("act", "greedy"))].append(r)
     rows = []
-    for (method, sim, size), group in sorted(groups.items(), key=lambda kv: _order(kv[0])):
-        row: dict[str, Any] = {"method": method, "sim": sim, "size": size, "n": len(group)}
+    for (method, sim, size, act), group in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+        row: dict[str, Any] = {"method": method, "sim": sim, "size": size, "act": act}
+        row["n"] = len(group)
         for metric in HEADLINE:
             row[f"{metric}_mean"], row[f"{metric}_ci95"] = mean_ci95(g[metric] for g in group)
+            scores = seed_scores(group, metric)
+            row["seeds"] = scores.shape[0]
+            est = interval_estimates(scores)
+            for key in ("iqm", "iqm_lo", "iqm_hi", "mean_lo", "mean_hi"):
+                row[f"{metric}_{key}"] = est[key]
         for metric in OTHER:
             row[f"{metric}_mean"] = float(np.mean([g.get(metric, 0.0) for g in group]))
         row["label"] = group[0].get("label", method)
@@ -54,10 +125,10 @@ def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def _order(key: tuple[str, str, str]) -> tuple:
-    method, sim, size = key
+def _order(key: tuple[str, ...]) -> tuple:
+    method, sim, size, act = key
     dims = tuple(int(v) for v in size.split("x"))
-    return (sim, method, dims)
+    return (sim, act, method, dims)
 
 
 def write_summary(records: list[dict[str, Any]], path: Path) -> list[dict[str, Any]]:
@@ -85,6 +156,6 @@ def read_summary(path: Path) -> list[dict[str, Any]]:
         rows = list(csv.DictReader(fh))
     for row in rows:
         for key, value in row.items():
-            if key not in ("method", "sim", "size", "label"):
+            if key not in TEXT_COLUMNS:
                 row[key] = float(value)
     return rows
