@@ -341,16 +341,24 @@ def evaluate(
     advisor: Annotated[str, typer.Option(help="Advisor of llm-only: local, openai, oracle.")] = (
         "local"
     ),
+    act: Annotated[
+        str,
+        typer.Option(
+            help="How trained policies act: stochastic (sampled, seeded per scenario), greedy "
+            "or both. Built-ins act by their own rule (act 'fixed')."
+        ),
+    ] = "both",
     ray_address: RayOpt = None,
 ) -> None:
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
 
     from pirl.agents.config import RunConfig
-    from pirl.evaluate.runner import EvalPlan, spec_for_builtin, spec_for_run
+    from pirl.evaluate.runner import EvalPlan, parse_acts, spec_for_builtin, spec_for_run
     from pirl.evaluate.runner import evaluate as run_evaluation
     from pirl.evaluate.scenarios import parse_size
 
+    acts = parse_acts(act)
     if episodes < 1:
         raise ConfigError(f"--episodes {episodes}: must be >= 1")
     run_list = _split_paths(runs or [])
@@ -377,6 +385,7 @@ def evaluate(
         sims=_split_words(sim or ["grid"]),
         env=cfg.env,
         config=cfg,
+        acts=acts,
     )
     factory = None
     if ray_address:
@@ -429,12 +438,19 @@ def _split_paths(values: list[Path]) -> list[Path]:
 def _summary_table(path: Path) -> Table:
     from pirl.evaluate.summary import read_summary
 
-    table = Table(title=str(path))
-    for col in ("method", "sim", "size", "n", "VCR", "BE", "RVC"):
+    table = Table(title=f"{path} (mean ± 95% CI over episodes; IQM [interval] over seeds)")
+    for col in ("method", "sim", "act", "size", "n", "seeds", "VCR", "BE", "RVC", "VCR IQM"):
         table.add_column(col)
     for row in read_summary(path):
         cells = [_mean_ci(row[m + "_mean"], row[m + "_ci95"]) for m in ("vcr", "be", "rvc")]
-        table.add_row(row["label"], row["sim"], row["size"], str(int(row["n"])), *cells)
+        seeds = int(row.get("seeds", 1))
+        iqm = f"{row['vcr_iqm']:.3f}"
+        if seeds > 1:
+            iqm += f" [{row['vcr_iqm_lo']:.3f}, {row['vcr_iqm_hi']:.3f}]"
+        table.add_row(
+            row["label"], row["sim"], row.get("act", ""), row["size"], str(int(row["n"])),
+            str(seeds), *cells, iqm,
+        )  # fmt: skip
     return table
 
 

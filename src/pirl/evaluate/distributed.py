@@ -161,6 +161,7 @@ class TrainJob(NamedTuple):
     seed: int
     run: Path
     resume: bool
+    pare: tuple[tuple[str, Any], ...] = ()
 
 
 def _train_job(job: TrainJob, cfg: RunConfig, *expert_done: Any) -> float:
@@ -168,7 +169,7 @@ def _train_job(job: TrainJob, cfg: RunConfig, *expert_done: Any) -> float:
     from pirl.agents.runs import train_one
 
     start = time.perf_counter()
-    train_one(job.method, job.advisor, job.seed, cfg, job.run, job.resume, show_progress=False)
+    train_one(job.method, job.advisor, job.seed, cfg, job.run, job.resume, False, dict(job.pare))
     return time.perf_counter() - start
 
 

@@ -7,18 +7,26 @@ resume from their last checkpoint, so an interrupted reproduction picks up where
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import multiprocessing as mp
+import os
 import shutil
 import time
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
+from pirl.agents.loading import (
+    BUILTIN,
+    check_act,  # noqa: I001
+)
 from pirl.agents.runs import train_one
-from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin, spec_for_run
+from pirl.evaluate.runner import EvalPlan, distinct_specs, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.world.config import ConfigError
 
@@ -35,6 +43,104 @@ def _run_state(run: Path) -> str:
     return "broken" if run.exists() else "absent"
 
 
+class PlannedRun(NamedTuple):
+    """One training run of a reproduction: its folder name, method, advisor, PARE overrides."""
+
+    name: str
+    method: str
+    advisor: str
+    seed: int
+    pare: tuple[tuple[str, Any], ...] = ()
+
+
+def pirl_variants(cfg: RunConfig, advisor: str) -> list[dict[str, Any]]:
+    """PARE overrides of each PIRL run per seed: ``reproduce.pirl_variants`` when given (a
+    variant without ``advisor`` takes ``advisor``), else PIRL with ``advisor`` and, with
+    ``reproduce.oracle_pirl``, PIRL with the oracle beside it."""
+    rp = cfg.reproduce
+    if rp.pirl_variants:
+        variants = []
+        for k, v in enumerate(rp.pirl_variants):
+            if not isinstance(v, dict):
+                raise ConfigError(f"reproduce.pirl_variants[{k}] must be a mapping of pare keys")
+            variants.append({"advisor": advisor, **v})
+        for v in variants:  # an unknown key or a bad value is refused before any training
+            cfg.with_overrides(pare=v)
+        return variants
+    variants = [{"advisor": advisor}]
+    if rp.oracle_pirl and advisor != "oracle":
+        variants.append({"advisor": "oracle"})
+    return variants
+
+
+def _variant_name(variant: dict[str, Any]) -> str:
+    """``pirl-<advisor>`` plus the other overrides, e.g. ``pirl-oracle-lamcam4-lammove1``."""
+    rest = "-".join(
+        f"{k.replace('_', '')}{v}" for k, v in sorted(variant.items()) if k != "advisor"
+    )
+    return "pirl-" + str(variant["advisor"]) + (f"-{rest}" if rest else "")
+
+
+def plan_runs(cfg: RunConfig, advisor: str) -> list[PlannedRun]:
+    """Every run of the profile, per seed in the order methods are listed."""
+    rp = cfg.reproduce
+    for method in rp.methods:
+        if method not in ("ppo-sr", "ppo-ewri", "pirl", "il"):
+            raise ConfigError(
+                f"reproduce.methods: {method!r} is not trained (ppo-sr, ppo-ewri, pirl, il)"
+            )
+    if "il" in rp.methods and "ppo-ewri" not in rp.methods:
+        raise ConfigError("reproduce.methods: il learns from ppo-ewri; list ppo-ewri too")
+    for act in rp.acts:
+        check_act(act)
+    if rp.headline_act not in rp.acts:
+        raise ConfigError(f"reproduce.headline_act {rp.headline_act!r} is not in acts")
+    variants = pirl_variants(cfg, advisor) if "pirl" in rp.methods else []
+    plan = []
+    for seed in rp.seeds:
+        for method in rp.methods:
+            if method == "pirl":
+                for v in variants:
+                    name = f"{_variant_name(v)}-s{seed}"
+                    plan.append(PlannedRun(name, "pirl", str(v["advisor"]), seed,
+                                           tuple(sorted(v.items()))))  # fmt: skip
+            else:
+                plan.append(PlannedRun(f"{method}-s{seed}", method, "", seed))
+    return plan
+
+
+def default_workers() -> int:
+    """Cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _worker_init() -> None:
+    """A training worker's thread budget: one torch thread, one numba thread (set before any
+    work), so N workers never run more than N busy threads of their own."""
+    os.environ["OMP_NUM_THREADS"] = "1"
+    os.environ["MKL_NUM_THREADS"] = "1"
+    import numba
+    import torch
+
+    torch.set_num_threads(1)
+    with contextlib.suppress(RuntimeError):  # already set in this process
+        torch.set_num_interop_threads(1)
+    numba.set_num_threads(1)
+    from pirl import _quiet
+
+    _quiet.install()
+
+
+def _train_job(job: PlannedRun, cfg_dict: dict[str, Any], run: str, resume: bool) -> float:
+    start = time.perf_counter()
+    cfg = RunConfig.from_dict(cfg_dict)
+    train_one(job.method, job.advisor, job.seed, cfg, Path(run), resume, False, dict(job.pare))
+    return time.perf_counter() - start
+
+
 def train_all(
     cfg: RunConfig,
     out: Path,
@@ -42,50 +148,164 @@ def train_all(
     log: Log,
     show_progress: bool = True,
     ray_address: str | None = None,
+    workers: int | None = None,
 ) -> list[Path]:
-    """Train (or resume, or skip) every method x seed; returns the finished run folders.
+    """Train (or resume, or skip) every run of :func:`plan_runs`; returns the run folders.
 
-    With ``ray_address`` the runs go to Ray in parallel (IL after its PPO-EWRI expert).
+    With ``workers`` > 1 the runs train in that many spawned processes at once, each with one
+    torch and one numba thread; an IL run starts once its PPO-EWRI expert has finished. With
+    ``ray_address`` the runs go to Ray instead. A run trains the same model whichever way.
     """
     from pirl.evaluate.distributed import TrainJob, train_on_ray
 
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    plan: list[tuple[str, str, int]] = []
-    for seed in cfg.reproduce.seeds:
-        plan += [("ppo-sr", "", seed), ("ppo-ewri", "", seed), ("pirl", advisor, seed)]
-        if cfg.reproduce.oracle_pirl and advisor != "oracle":
-            plan.append(("pirl", "oracle", seed))
-        plan.append(("il", "", seed))
     finished = []
-    remote: list[TrainJob] = []
-    for method, adv, seed in plan:
-        name = f"{method}{'-' + adv if adv else ''}-s{seed}"
-        run = runs_dir / name
+    todo: list[tuple[PlannedRun, Path, bool]] = []
+    for job in plan_runs(cfg, advisor):
+        run = runs_dir / job.name
         state = _run_state(run)
+        finished.append(run)
         if state == "complete":
-            log(f"{name}: already trained")
-            finished.append(run)
+            log(f"{job.name}: already trained")
             continue
         if state == "broken":
-            log(f"{name}: incomplete with no checkpoint; starting again")
+            log(f"{job.name}: incomplete with no checkpoint; starting again")
             shutil.rmtree(run)
         resume = state == "resumable"
-        log(f"{name}: {'resuming' if resume else 'training'}")
-        finished.append(run)
-        if ray_address:
-            remote.append(TrainJob(name, method, adv, seed, run, resume))
-            continue
-        start = time.perf_counter()
-        train_one(method, adv, seed, cfg, run, resume, show_progress)
-        log(f"{name}: done in {time.perf_counter() - start:.0f} s")
+        log(f"{job.name}: {'resuming' if resume else 'training'}")
+        todo.append((job, run, resume))
     if ray_address:
+        remote = [TrainJob(j.name, j.method, j.advisor, j.seed, r, res, j.pare)
+                  for j, r, res in todo]  # fmt: skip
         train_on_ray(ray_address, cfg, remote, log)
+        return finished
+    workers = workers if workers is not None else (cfg.reproduce.train_workers or default_workers())
+    workers = max(1, min(workers, len(todo)))
+    if workers == 1:
+        for job, run, resume in sorted(todo, key=lambda t: t[0].method == "il"):
+            start = time.perf_counter()
+            train_one(job.method, job.advisor, job.seed, cfg, run, resume, show_progress,
+                      dict(job.pare))  # fmt: skip
+            log(f"{job.name}: done in {time.perf_counter() - start:.0f} s")
+        return finished
+    _train_parallel(cfg, todo, workers, log)
     return finished
 
 
+def _train_parallel(
+    cfg: RunConfig, todo: list[tuple[PlannedRun, Path, bool]], workers: int, log: Log
+) -> None:
+    """``todo`` in ``workers`` processes; IL waits for its expert. Every run goes to its end
+    even when another fails (finished runs are kept); then the first failure is raised."""
+    cfg_dict = cfg.to_dict()
+    waiting = [t for t in todo if t[0].method == "il"]
+    ready = [t for t in todo if t[0].method != "il"]
+    pending_experts = {t[0].name for t in ready if t[0].method == "ppo-ewri"}
+    failure: BaseException | None = None
+    log(f"training {len(todo)} runs in {workers} worker processes (1 torch + 1 numba thread each)")
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init) as pool:
+        futures: dict[Future, PlannedRun] = {}
+
+        def submit(item: tuple[PlannedRun, Path, bool]) -> None:
+            job, run, resume = item
+            futures[pool.submit(_train_job, job, cfg_dict, str(run), resume)] = job
+
+        for item in ready:
+            submit(item)
+        for item in list(waiting):
+            if f"ppo-ewri-s{item[0].seed}" not in pending_experts:
+                waiting.remove(item)
+                submit(item)
+        while futures:
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
+            for future in done:
+                job = futures.pop(future)
+                ok = False
+                try:
+                    log(f"{job.name}: done in {future.result():.0f} s")
+                    ok = True
+                except Exception as exc:  # noqa: BLE001 - reported, raised after the others
+                    log(f"{job.name}: failed ({type(exc).__name__}: {exc})")
+                    failure = failure or exc
+                pending_experts.discard(job.name)
+                for item in list(waiting):
+                    if f"ppo-ewri-s{item[0].seed}" == job.name:
+                        waiting.remove(item)
+                        if ok:
+                            submit(item)
+                        else:
+                            log(f"{item[0].name}: not trained (its expert failed)")
+    if failure is not None:
+        raise failure
+
+
+# Rates measured on the 2-core development machine (see docs/results.md for the commands),
+# one worker process each: PPO environment steps per second at quick's network, PIRL's cost
+# against PPO (student mode, embedded-LLM teacher), seconds per IL run, grid evaluation
+# episodes per second (batched, one trained policy) per world side, and per-episode seconds
+# in the physics simulator and for one LLM-only call.
+RATES: dict[str, Any] = {
+    "ppo_steps_per_s": 1000.0,
+    "pirl_cost": 1.5,
+    "il_s": 60.0,
+    "eval_eps_per_s": {15: 40.0, 30: 10.0, 45: 4.0, 60: 2.0},
+    "physics_s_per_episode": 120.0,
+    "llm_only_s_per_call": 1.0,
+}
+
+
+def describe_plan(
+    cfg: RunConfig, advisor: str, out: Path, train_workers: int, eval_workers: int
+) -> list[str]:
+    """What the profile will do and about how long it takes, before it starts: runs and steps,
+    episodes per phase, and estimated minutes from :data:`RATES` (already finished runs
+    count as done)."""
+    rp, r = cfg.reproduce, RATES
+    jobs = plan_runs(cfg, advisor)
+    todo = [j for j in jobs if _run_state(Path(out) / "runs" / j.name) != "complete"]
+    ppo_s = 0.0
+    for j in todo:
+        if j.method == "il":
+            ppo_s += r["il_s"]
+        else:
+            cost = r["pirl_cost"] if j.method == "pirl" else 1.0
+            ppo_s += cfg.train.total_steps * cost / r["ppo_steps_per_s"]
+    train_min = ppo_s / max(1, min(train_workers, len(todo) or 1)) / 60
+    sizes = [parse_size(s) for s in rp.sizes]
+    learned = len(jobs) * len(rp.acts)
+    eval_s = 0.0
+    for size in sizes:
+        rate = r["eval_eps_per_s"].get(size[0]) or 10.0 * (30 / size[0]) ** 2
+        eval_s += learned * rp.episodes / rate
+        for name in rp.builtins:
+            n = rp.llm_only_episodes if name == "llm-only" else rp.episodes
+            eval_s += n * (4.0 / rate)  # a planner plays episode by episode
+            if name == "llm-only":
+                calls = rp.llm_only_max_calls or 200
+                eval_s += n * calls * r["llm_only_s_per_call"]
+    physics_eps = (len(jobs) * len(rp.acts) + len(rp.builtins)) * rp.physics_episodes
+    physics_eps *= len(rp.physics_sizes)
+    eval_s += physics_eps * r["physics_s_per_episode"]
+    eval_min = eval_s / max(1, eval_workers) / 60
+    total_eval = learned * rp.episodes * len(sizes)
+    return [
+        f"plan: {len(jobs)} training runs ({len(todo)} to train) of {cfg.train.total_steps:,} "
+        f"steps, seeds {list(rp.seeds)}, in {train_workers} worker processes: about "
+        f"{train_min:.0f} min",
+        f"plan: evaluation of {total_eval:,} episodes of trained policies "
+        f"({rp.episodes} scenarios x {len(sizes)} sizes x {len(rp.acts)} act modes x "
+        f"{len(jobs)} runs), the built-ins and {physics_eps} physics episodes in "
+        f"{eval_workers} processes: about {eval_min:.0f} min",
+        f"plan: about {(train_min + eval_min) / 60:.1f} h in all (rates measured on a 2-core "
+        "machine; scale by your cores)",
+    ]
+
+
 def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) -> dict[str, Path]:
-    """One animation per method on the same 30x30x3 scenario (the first evaluation seed)."""
+    """One animation per method on the same 30x30x3 scenario (the first evaluation seed);
+    trained policies act in the headline act mode, named in the caption."""
     from pirl.advice.factory import make_advisor
     from pirl.agents.loading import load_policy
     from pirl.env.vcpp_env import VCPPEnv
@@ -96,11 +316,15 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
     env = VCPPEnv(cfg.env.replace(size=size, render_cell_px=8), render_mode="rgb_array")
     specs = [spec_for_run(r) for r in runs if r.name.endswith(f"-s{cfg.reproduce.seeds[0]}")]
     specs += [
-        spec_for_builtin("llm-only", advisor, cfg.reproduce.llm_only_max_calls),
-        spec_for_builtin("boustrophedon"),
+        spec_for_builtin(name, advisor, cfg.reproduce.llm_only_max_calls)
+        if name == "llm-only"
+        else spec_for_builtin(name)
+        for name in cfg.reproduce.builtins
+        if name in ("llm-only", "boustrophedon")
     ]
+    act = cfg.reproduce.headline_act
     gifs = {}
-    for spec in specs:
+    for spec in distinct_specs(specs):
         adv = make_advisor(spec.advisor, cfg) if spec.advisor else None
         policy = load_policy(
             spec.source,
@@ -108,9 +332,11 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
             seed=0,
             max_calls=spec.max_calls,
             prompt_variant=cfg.pare.prompt_variant,
+            act=act,
         )
         result = run_episode(env, policy, seed, record=True, frame_every=cfg.reproduce.gif_every)
-        gifs[f"{spec.label}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
+        how = f", act {act}" if spec.source not in BUILTIN else ""
+        gifs[f"{spec.label}{how}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
             result.frames, folder / f"{spec.key}.gif", fps=12
         )
     return gifs
@@ -128,7 +354,9 @@ def reproduce(
 ) -> Path:
     """The main job. Returns the path of ``report.html``.
 
-    ``ray_address`` sends training runs and evaluation episodes to Ray (``pirl[distributed]``).
+    ``workers`` training processes at once (default ``reproduce.train_workers``, 0 = the
+    cores) and evaluation processes (default ``reproduce.workers``). ``ray_address`` sends
+    training runs and evaluation episodes to Ray (``pirl[distributed]``).
     """
     from pirl.agents.train import git_commit
     from pirl.evaluate.report import write_report
@@ -136,16 +364,19 @@ def reproduce(
     if advisor not in ("local", "openai", "oracle"):
         raise ConfigError(f"--advisor {advisor!r}: allowed values are local, openai, oracle")
     out = Path(out)
-    started = time.perf_counter()
-    runs = train_all(cfg, out, advisor, log, show_progress, ray_address)
-    trained_s = time.perf_counter() - started
     rp = cfg.reproduce
+    train_workers = workers or rp.train_workers or default_workers()
+    for line in describe_plan(cfg, advisor, out, train_workers, workers or rp.workers):
+        log(line)
+    started = time.perf_counter()
+    runs = train_all(cfg, out, advisor, log, show_progress, ray_address, train_workers)
+    trained_s = time.perf_counter() - started
     specs = [spec_for_run(r) for r in runs]
-    specs += [
-        spec_for_builtin("llm-only", advisor, rp.llm_only_max_calls),
-        spec_for_builtin("boustrophedon"),
-        spec_for_builtin("random"),
-    ]
+    for name in rp.builtins:
+        if name == "llm-only":
+            specs.append(spec_for_builtin("llm-only", advisor, rp.llm_only_max_calls))
+        else:
+            specs.append(spec_for_builtin(name))
     plan = EvalPlan(
         specs=specs,
         sizes=[parse_size(s) for s in rp.sizes],
@@ -156,6 +387,7 @@ def reproduce(
         sims=["grid", "physics"] if rp.physics_sizes else ["grid"],
         sim_sizes={"physics": [parse_size(x) for x in rp.physics_sizes]},
         sim_episodes={"physics": rp.physics_episodes},
+        acts=list(rp.acts),
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
     factory = None
@@ -174,12 +406,21 @@ def reproduce(
         f"LLM-only), training seeds {list(rp.seeds)}, {cfg.train.total_steps:,} steps per "
         f"PPO run; physics simulator: {rp.physics_episodes} scenarios on "
         f"{', '.join(rp.physics_sizes) or 'no size'}. "
-        f"Training took {trained_s / 60:.1f} min, everything "
-        f"{(time.perf_counter() - started) / 60:.1f} min.",
+        f"Training took {trained_s / 60:.1f} min ({train_workers} worker processes), "
+        f"everything {(time.perf_counter() - started) / 60:.1f} min.",
+        f"Trained policies are evaluated acting {' and '.join(rp.acts)}; the headline mode is "
+        f"{rp.headline_act} for every trained method (docs/results.md says why).",
         "Advisors other than an LLM (the oracle) and planners are labelled as such.",
     ]
     return write_report(
-        out / "report", summary, runs, gifs, stats, code_version=git_commit(), notes=notes
+        out / "report",
+        summary,
+        runs,
+        gifs,
+        stats,
+        code_version=git_commit(),
+        notes=notes,
+        headline_act=rp.headline_act,
     )
 
 

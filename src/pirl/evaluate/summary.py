@@ -99,7 +99,8 @@ def probability_of_improvement(
         {"xy": (x, y)}, metrics.probability_of_improvement, reps=reps,
         random_state=np.random.RandomState(0),
     )  # fmt: skip
-    return float(point["xy"]), float(ci["xy"][0]), float(ci["xy"][1])
+    lo, hi = np.ravel(ci["xy"])[:2]
+    return float(np.ravel(point["xy"])[0]), float(lo), float(hi)
 
 
 def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
