@@ -248,7 +248,8 @@ def _train_parallel(
 # in the physics simulator and for one LLM-only call.
 RATES: dict[str, Any] = {
     "ppo_steps_per_s": 1000.0,
-    "pirl_cost": 1.5,
+    "pirl_cost": {"oracle": 1.5, "local": 2.5, "openai": 2.5},  # student mode
+    "local_batch_s": 20.0,  # sync/async PARE: one batch of answers from the embedded LLM
     "il_s": 60.0,
     "eval_eps_per_s": {15: 40.0, 30: 10.0, 45: 4.0, 60: 2.0},
     "physics_s_per_episode": 120.0,
@@ -269,9 +270,14 @@ def describe_plan(
     for j in todo:
         if j.method == "il":
             ppo_s += r["il_s"]
+        elif j.method != "pirl":
+            ppo_s += cfg.train.total_steps / r["ppo_steps_per_s"]
         else:
-            cost = r["pirl_cost"] if j.method == "pirl" else 1.0
-            ppo_s += cfg.train.total_steps * cost / r["ppo_steps_per_s"]
+            pare = cfg.with_overrides(pare=dict(j.pare)).pare
+            ppo_s += cfg.train.total_steps * r["pirl_cost"][j.advisor] / r["ppo_steps_per_s"]
+            if pare.mode != "student" and j.advisor == "local":  # every K steps an answer
+                batches = cfg.train.total_steps / pare.query_every / cfg.advisor.local_batch_size
+                ppo_s += batches * r["local_batch_s"]
     train_min = ppo_s / max(1, min(train_workers, len(todo) or 1)) / 60
     sizes = [parse_size(s) for s in rp.sizes]
     learned = len(jobs) * len(rp.acts)
@@ -285,7 +291,7 @@ def describe_plan(
             if name == "llm-only":
                 calls = rp.llm_only_max_calls or 200
                 eval_s += n * calls * r["llm_only_s_per_call"]
-    physics_eps = (len(jobs) * len(rp.acts) + len(rp.builtins)) * rp.physics_episodes
+    physics_eps = (len(jobs) + len(rp.builtins)) * rp.physics_episodes  # headline act only
     physics_eps *= len(rp.physics_sizes)
     eval_s += physics_eps * r["physics_s_per_episode"]
     eval_min = eval_s / max(1, eval_workers) / 60
@@ -388,6 +394,7 @@ def reproduce(
         sim_sizes={"physics": [parse_size(x) for x in rp.physics_sizes]},
         sim_episodes={"physics": rp.physics_episodes},
         acts=list(rp.acts),
+        sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
     factory = None

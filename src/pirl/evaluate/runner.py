@@ -111,6 +111,8 @@ class EvalPlan:
     sim_sizes: dict[str, list[tuple[int, int, int]]] = field(default_factory=dict)
     sim_episodes: dict[str, int] = field(default_factory=dict)
     acts: list[str] = field(default_factory=lambda: ["greedy"])
+    sim_acts: dict[str, list[str]] = field(default_factory=dict)
+    """Act modes per simulator, overriding ``acts`` (the physics simulator is slow)."""
     batched: bool = True
     """Grid episodes of a trained policy run batched (one forward per step for all scenarios
     of a chunk); False plays them one by one (the same results, slower)."""
@@ -218,20 +220,24 @@ def run_chunk(
 def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
     tasks = []
     for spec in plan.specs:
-        acts = [FIXED] if spec.source in BUILTIN else plan.acts
-        for act in acts:
-            for sim in plan.sims:
-                episodes = plan.sim_episodes.get(sim, plan.episodes)
-                episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
-                # A batched chunk is best large: one chunk per worker; else two per worker.
-                batched = plan.batched and sim == "grid" and act != FIXED
-                for size in plan.sim_sizes.get(sim, plan.sizes):
-                    seeds = scenario_seeds(size, episodes)
-                    parts = max(1, workers if batched else 2 * workers)
-                    chunk = max(1, math.ceil(len(seeds) / parts))
-                    for i in range(0, len(seeds), chunk):
-                        tasks.append((spec, size, sim, seeds[i : i + chunk], act))
+        for act, sim in _act_sims(plan, spec):
+            episodes = plan.sim_episodes.get(sim, plan.episodes)
+            episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
+            # A batched chunk is best large: one chunk per worker; else two per worker.
+            batched = plan.batched and sim == "grid" and act != FIXED
+            for size in plan.sim_sizes.get(sim, plan.sizes):
+                seeds = scenario_seeds(size, episodes)
+                parts = max(1, workers if batched else 2 * workers)
+                chunk = max(1, math.ceil(len(seeds) / parts))
+                for i in range(0, len(seeds), chunk):
+                    tasks.append((spec, size, sim, seeds[i : i + chunk], act))
     return tasks
+
+
+def _act_sims(plan: EvalPlan, spec: MethodSpec) -> list[tuple[str, str]]:
+    if spec.source in BUILTIN:
+        return [(FIXED, sim) for sim in plan.sims]
+    return [(a, sim) for a in plan.acts for sim in plan.sims if a in plan.sim_acts.get(sim, [a])]
 
 
 def evaluate(
