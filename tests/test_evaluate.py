@@ -85,3 +85,110 @@ def test_bad_plans_are_refused(tmp_path):
         )
     with pytest.raises(ConfigError, match="nothing to evaluate"):
         evaluate(EvalPlan([], [(10, 10, 3)], 1), tmp_path)
+
+
+# -- act modes, batching, seeds as the unit (issue 10) ---------------------------------------
+@pytest.fixture(scope="module")
+def trained_runs(tmp_path_factory):
+    """Two tiny PPO-EWRI runs (seeds 0 and 1) on the test preset."""
+    from pathlib import Path
+
+    from pirl.agents.config import RunConfig
+    from pirl.agents.runs import train_one
+
+    root = tmp_path_factory.mktemp("runs")
+    cfg = RunConfig.from_yaml(Path(__file__).resolve().parents[1] / "configs" / "test.yaml")
+    runs = []
+    for seed in (0, 1):
+        run = root / f"ppo-ewri-s{seed}"
+        train_one("ppo-ewri", "", seed, cfg, run, False, False)
+        runs.append(run)
+    return cfg, runs
+
+
+def _episodes(folder):
+    return [json.loads(line) for line in (folder / "episodes.jsonl").open()]
+
+
+def test_stochastic_evaluation_is_seeded_per_scenario_and_differs_from_greedy(
+    trained_runs, tmp_path
+):
+    from pirl.evaluate.runner import spec_for_run
+
+    cfg, runs = trained_runs
+    plan = EvalPlan(
+        specs=[spec_for_run(runs[0]), spec_for_builtin("boustrophedon")], sizes=[(12, 12, 3)],
+        episodes=3, env=cfg.env, config=cfg, acts=["stochastic", "greedy"],
+    )  # fmt: skip
+    first = evaluate(plan, tmp_path / "a", workers=1)
+    again = evaluate(plan, tmp_path / "b", workers=2)
+    assert first.read_text() == again.read_text()
+    records = _episodes(tmp_path / "a")
+    assert records == _episodes(tmp_path / "b")
+    acts = {(r["method"], r["act"]) for r in records}
+    assert acts == {("ppo-ewri", "stochastic"), ("ppo-ewri", "greedy"), ("boustrophedon", "fixed")}
+    by_act = {
+        act: [(r["seed"], r["steps"], r["vcr"], r["camera_share"]) for r in records
+              if r["method"] == "ppo-ewri" and r["act"] == act]
+        for act in ("stochastic", "greedy")
+    }  # fmt: skip
+    assert [s[0] for s in by_act["stochastic"]] == [s[0] for s in by_act["greedy"]]
+    assert by_act["stochastic"] != by_act["greedy"]
+    rows = read_summary(first)
+    assert {r["act"] for r in rows} == {"stochastic", "greedy", "fixed"}
+    with pytest.raises(ConfigError, match="stochastic, greedy, both"):
+        evaluate(replace_acts(plan, ["sampled"]), tmp_path / "c")
+
+
+def replace_acts(plan, acts):
+    from dataclasses import replace
+
+    return replace(plan, acts=acts)
+
+
+def test_batched_evaluation_equals_per_episode(trained_runs, tmp_path):
+    from pirl.evaluate.runner import spec_for_run
+
+    cfg, runs = trained_runs
+    out = {}
+    for batched in (True, False):
+        plan = EvalPlan(
+            specs=[spec_for_run(r) for r in runs], sizes=[(14, 14, 3), (20, 12, 3)], episodes=4,
+            env=cfg.env, config=cfg, acts=["stochastic", "greedy"], batched=batched,
+        )  # fmt: skip
+        out[batched] = evaluate(plan, tmp_path / str(batched), workers=1)
+    assert _episodes(tmp_path / "True") == _episodes(tmp_path / "False")
+    assert out[True].read_text() == out[False].read_text()
+
+
+def test_seeds_are_the_unit_on_a_hand_made_table():
+    import numpy as np
+    from scipy import stats
+
+    from pirl.evaluate.summary import interval_estimates, probability_of_improvement, seed_scores
+
+    seeds = {0: [0.5, 0.7], 1: [0.8, 0.8], 2: [0.2, 0.4], 3: [0.9, 0.7]}
+    records = [
+        {"method": "pirl", "sim": "grid", "size": "30x30x3", "act": "stochastic",
+         "train_seed": s, "vcr": v, "be": v / 2, "rvc": 1 - v}
+        for s, values in seeds.items() for v in values
+    ]  # fmt: skip
+    (row,) = summarize(records)
+    per_seed = np.array([0.6, 0.8, 0.3, 0.8])
+    assert row["seeds"] == 4 and row["n"] == 8
+    assert row["vcr_mean"] == pytest.approx(per_seed.mean())
+    # IQM of 4 runs: the middle two (scipy's 25% trimmed mean, as rliable computes it).
+    assert row["vcr_iqm"] == pytest.approx(stats.trim_mean(per_seed, 0.25))
+    assert row["vcr_iqm"] == pytest.approx((0.6 + 0.8) / 2)
+    assert per_seed.min() <= row["vcr_iqm_lo"] <= row["vcr_iqm"] <= row["vcr_iqm_hi"] <= 0.8
+    assert per_seed.min() <= row["vcr_mean_lo"] < row["vcr_mean"] < row["vcr_mean_hi"] <= 0.8
+    # The per-episode interval is the secondary spread, over 8 episodes.
+    assert row["vcr_ci95"] == pytest.approx(mean_ci95([v for r in seeds.values() for v in r])[1])
+    assert seed_scores(records, "vcr").ravel().tolist() == pytest.approx(per_seed.tolist())
+    # A single run has no spread over runs.
+    one = interval_estimates(np.array([[0.4]]))
+    assert one["iqm_lo"] == one["iqm_hi"] == 0.4
+    # Every run of x above every run of y: P(improvement) = 1; equal runs: 0.5.
+    x, y = np.array([[0.9], [0.8], [0.85]]), np.array([[0.5], [0.6], [0.4]])
+    assert probability_of_improvement(x, y)[0] == pytest.approx(1.0)
+    assert probability_of_improvement(y, y)[0] == pytest.approx(0.5)

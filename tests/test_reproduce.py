@@ -97,3 +97,65 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(reproduced):
     reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
     assert "ppo-sr-s0: resuming" in logs
     assert json.loads((run / "meta.json").read_text())["complete"]
+
+
+def _probabilities(run: Path):
+    import numpy as np
+
+    from pirl.agents.loading import load_policy
+    from pirl.env.vec_env import make_vec_env
+
+    cfg = RunConfig.from_yaml(run / "config.yaml")
+    obs = make_vec_env(8, seed=123, config=cfg.env).reset()
+    return np.asarray(load_policy(run).probabilities(obs))
+
+
+def test_parallel_training_gives_the_same_models_as_sequential(tmp_path):
+    import numpy as np
+
+    from pirl.evaluate.reproduce import train_all
+
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
+        reproduce={"methods": ["ppo-sr", "ppo-ewri", "il"], "seeds": [0]}
+    )
+    logs: list[str] = []
+    seq = train_all(cfg, tmp_path / "seq", "oracle", logs.append, False, workers=1)
+    par = train_all(cfg, tmp_path / "par", "oracle", logs.append, False, workers=2)
+    assert any("in 2 worker processes" in line for line in logs)
+    assert [p.name for p in seq] == [p.name for p in par] == ["ppo-sr-s0", "ppo-ewri-s0", "il-s0"]
+    for a, b in zip(seq, par, strict=True):
+        np.testing.assert_array_equal(_probabilities(a), _probabilities(b))
+
+
+def test_the_camera_study_profile_loads_and_runs_at_test_size(tmp_path):
+    import yaml
+
+    study = yaml.safe_load((ROOT / "configs" / "study-camera.yaml").read_text())
+    tiny = yaml.safe_load((ROOT / "configs" / "test.yaml").read_text())
+    rp = study["reproduce"]
+    assert len(rp["seeds"]) >= 3 and rp["sizes"] == ["15", "30", "60"]
+    assert set(rp["acts"]) == {"stochastic", "greedy"}
+    for section in ("env", "ppo", "train", "il"):  # the study's design at the test's budgets
+        study[section] = tiny[section]
+    study["reproduce"].update(seeds=[0], sizes=["12"], episodes=2)
+    cfg = RunConfig.from_dict(study)
+    logs: list[str] = []
+    report = reproduce(cfg, tmp_path, advisor="local", log=logs.append, show_progress=False)
+    assert logs[0].startswith("plan: 6 training runs")
+    runs = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    assert len(runs) == 6 and "pirl-local-lamcam1.0-lammove1.0-s0" in runs
+    rows = list(csv_rows(tmp_path / "eval" / "summary.csv"))
+    labels = {r["label"] for r in rows if r["method"].startswith("pirl")}
+    assert len(labels) == 4  # each PIRL variant its own row, named by advisor and weights
+    assert all("lam_cam" in label for label in labels), labels
+    assert {r["act"] for r in rows} == {"stochastic", "greedy", "fixed"}
+    table = (report.parent / "table.md").read_text()
+    assert "Camera use" in table and "Probability of improvement" in table
+    assert (report.parent / "intervals_stochastic.png").stat().st_size > 10_000
+
+
+def csv_rows(path: Path):
+    import csv
+
+    with open(path, newline="") as fh:
+        yield from csv.DictReader(fh)
