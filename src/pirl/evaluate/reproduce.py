@@ -241,18 +241,20 @@ def _train_parallel(
         raise failure
 
 
-# Rates measured on the 2-core development machine (see docs/results.md for the commands),
-# one worker process each: PPO environment steps per second at quick's network, PIRL's cost
-# against PPO (student mode, embedded-LLM teacher), seconds per IL run, grid evaluation
-# episodes per second (batched, one trained policy) per world side, and per-episode seconds
-# in the physics simulator and for one LLM-only call.
+# Rates on the 2-core development machine, one worker process each, shared with other jobs.
+# Measured (issue 10): PPO steps/s at quick's network (a 32,768-step PPO-EWRI run, start-up
+# included: 5,000/s; 4,000 leaves room for a busy machine), PIRL's cost against PPO in student
+# mode (oracle teacher 1.4x, embedded-LLM teacher 2.5x, LLM load included), batched grid
+# evaluation at 30x30x3 (145 episodes/s, benchmarks/eval_throughput.py; other sizes scale
+# with the area). Estimated, not measured here: an IL run, a physics episode (PyFlyt), one
+# embedded-LLM answer for LLM-only, one batch of answers in sync PARE (docs/deviations.md).
 RATES: dict[str, Any] = {
-    "ppo_steps_per_s": 1000.0,
-    "pirl_cost": {"oracle": 1.5, "local": 2.5, "openai": 2.5},  # student mode
+    "ppo_steps_per_s": 4000.0,
+    "pirl_cost": {"oracle": 1.4, "local": 2.5, "openai": 2.5},  # student mode
     "local_batch_s": 20.0,  # sync/async PARE: one batch of answers from the embedded LLM
     "il_s": 60.0,
-    "eval_eps_per_s": {15: 40.0, 30: 10.0, 45: 4.0, 60: 2.0},
-    "physics_s_per_episode": 120.0,
+    "eval_eps_per_s": {30: 145.0},
+    "physics_s_per_episode": 30.0,
     "llm_only_s_per_call": 1.0,
 }
 
@@ -283,7 +285,7 @@ def describe_plan(
     learned = len(jobs) * len(rp.acts)
     eval_s = 0.0
     for size in sizes:
-        rate = r["eval_eps_per_s"].get(size[0]) or 10.0 * (30 / size[0]) ** 2
+        rate = r["eval_eps_per_s"][30] * (30 * 30) / (size[0] * size[1])
         eval_s += learned * rp.episodes / rate
         for name in rp.builtins:
             n = rp.llm_only_episodes if name == "llm-only" else rp.episodes
