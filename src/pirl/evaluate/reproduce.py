@@ -242,15 +242,15 @@ def _train_parallel(
 
 
 # Rates on the 2-core development machine, one worker process each, shared with other jobs.
-# Measured (issue 10): PPO steps/s at quick's network (a 32,768-step PPO-EWRI run, start-up
-# included: 5,000/s; 4,000 leaves room for a busy machine), PIRL's cost against PPO in student
-# mode (oracle teacher 1.4x, embedded-LLM teacher 2.5x, LLM load included), batched grid
+# Measured (issue 10, quick profile in 2 workers): PPO steps/s at quick's network (262,144
+# steps in 45 s: 5,800/s; 5,000 leaves room for a busy machine), PIRL's cost against PPO in
+# student mode (157 s with the embedded-LLM teacher, 165 s with the oracle's), batched grid
 # evaluation at 30x30x3 (145 episodes/s, benchmarks/eval_throughput.py; other sizes scale
 # with the area). Estimated, not measured here: an IL run, a physics episode (PyFlyt), one
 # embedded-LLM answer for LLM-only, one batch of answers in sync PARE (docs/deviations.md).
 RATES: dict[str, Any] = {
-    "ppo_steps_per_s": 4000.0,
-    "pirl_cost": {"oracle": 1.4, "local": 2.5, "openai": 2.5},  # student mode
+    "ppo_steps_per_s": 5000.0,
+    "pirl_cost": {"oracle": 3.5, "local": 3.5, "openai": 3.5},  # student mode
     "local_batch_s": 20.0,  # sync/async PARE: one batch of answers from the embedded LLM
     "il_s": 60.0,
     "eval_eps_per_s": {30: 145.0},
