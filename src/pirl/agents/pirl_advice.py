@@ -27,6 +27,8 @@ class PirlAdvice:
     """Student mode: the teacher answers, shared across runs and processes."""
     teacher_rate: float
     """Student mode: teacher calls per env-step."""
+    teacher_batch: int
+    """Student mode: most prompts per teacher request (the backend's own batch size)."""
     label: str
     """e.g. ``PIRL (student of local:SmolLM2-135M-Instruct; lam_cam 1, lam_move 1)``."""
 
@@ -81,10 +83,13 @@ def build_pirl_advice(
             raise
     label = pirl_label(cfg, advisor.label)
     rate = cfg.pare.oracle_teacher_rate if advisor.name == "oracle" else cfg.pare.teacher_rate
+    batch = {"oracle": 256, "local": cfg.advisor.local_batch_size}.get(
+        advisor.name, 4 * cfg.advisor.openai_concurrency
+    )
     if cfg.pare.mode != "student":
-        return PirlAdvice(advisor, None, None, rate, label)
+        return PirlAdvice(advisor, None, None, rate, batch, label)
     student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed)
-    return PirlAdvice(advisor, student, dataset, rate, label)
+    return PirlAdvice(advisor, student, dataset, rate, batch, label)
 
 
 def make_student(

@@ -228,6 +228,7 @@ def build_env_stack(
             prompt_variant=p.prompt_variant, student=advice.student, dataset=advice.dataset,
             teacher_rate=advice.teacher_rate, gate=p.student_gate, refit_every=cfg.ppo.n_steps,
             fit_steps=p.student_fit_steps, wait_teacher=p.student_wait_teacher,
+            teacher_batch=advice.teacher_batch,
             max_failure_rate=p.max_failure_rate, failure_window=p.failure_window,
             label=advice.label, seed=seed, source=source,
         )  # fmt: skip

@@ -41,6 +41,8 @@ class TeacherQueue:
         key: the dataset key of this teacher (:func:`pirl.advice.student.teacher_key`).
         rate: teacher calls per env-step (expected).
         max_pending: most states waiting to be sent; further samples are skipped and counted.
+        batch_size: most states in one request; the rest wait for the next boundary, so a
+            slow teacher's answers arrive in steady small batches.
         prompt_variant, decimals: the prompt's settings.
         seed: the sampling stream.
         source: the run's name in the dataset (what a resume forgets past its checkpoint).
@@ -53,6 +55,7 @@ class TeacherQueue:
         key: str,
         rate: float,
         max_pending: int = 64,
+        batch_size: int = 16,
         prompt_variant: str = "paper",
         decimals: int = 2,
         seed: int = 0,
@@ -60,6 +63,7 @@ class TeacherQueue:
     ) -> None:
         self.advisor, self.dataset, self.key, self.source = advisor, dataset, key, source
         self.rate, self.max_pending = float(rate), int(max_pending)
+        self.batch_size = max(1, int(batch_size))
         self.prompt_variant, self.decimals = prompt_variant, int(decimals)
         self.rng = np.random.default_rng(seed)
         self.credit = 0.0
@@ -105,12 +109,14 @@ class TeacherQueue:
         it), store its answers, send the waiting states. Returns the collected answers."""
         answers = self._collect(wait, timeout_s, t)
         if self._job is None and self._prompts and not self.spent:
+            k = self.batch_size
             batch = _Batch(
-                self._prompts,
-                self._views or None,
-                np.stack(self._features).astype(np.float32),
+                self._prompts[:k],
+                self._views[:k] or None,
+                np.stack(self._features[:k]).astype(np.float32),
             )
-            self._prompts, self._views, self._features = [], [], []
+            self._prompts, self._views = self._prompts[k:], self._views[k:]
+            self._features = self._features[k:]
             future = self._pool.submit(self.advisor.advise, batch.prompts, batch.views)
             self._job = (batch, future)
             self.sent += len(batch.prompts)

@@ -198,6 +198,7 @@ class PAREVecEnv(VecEnvWrapper):
         fit_steps: student mode: Adam steps per refit.
         wait_teacher: student mode: collect the teacher's batch at each boundary (reproducible
             runs; PPO then waits for a slow teacher).
+        teacher_batch: student mode: most prompts per teacher request.
         max_failure_rate, failure_window: stop when more than this share of the last
             ``failure_window`` teacher answers failed or did not parse (0 disables).
         label: what this PIRL configuration is called in reports.
@@ -225,6 +226,7 @@ class PAREVecEnv(VecEnvWrapper):
         refit_every: int = 256,
         fit_steps: int = 100,
         wait_teacher: bool = False,
+        teacher_batch: int = 16,
         max_failure_rate: float = 0.5,
         failure_window: int = 200,
         label: str = "",
@@ -278,6 +280,7 @@ class PAREVecEnv(VecEnvWrapper):
             self.teacher = TeacherQueue(
                 advisor, dataset, student.teacher, teacher_rate,
                 max_pending=max(64, int(2 * teacher_rate * n * self.refit_every) + 1),
+                batch_size=teacher_batch,
                 prompt_variant=prompt_variant, decimals=decimals, seed=seed, source=source,
             )  # fmt: skip
             self._update_student_stats()
