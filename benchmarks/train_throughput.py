@@ -147,7 +147,8 @@ def main() -> None:
     )
     stats = None
     if not args.no_pirl:
-        advisor = make_advisor(args.advisor, cfg, cache=False)  # cold: every prompt reaches the LLM
+        # Cold cache: every prompt reaches the LLM, which runs in its own process as in training.
+        advisor = make_advisor(args.advisor, cfg, cache=False, process=True)
         advice = build_pirl_advice(cfg, advisor, probe=False)
         stack = build_env_stack("pirl", cfg, seed=0, advice=advice)
         rows.append(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Any
@@ -15,8 +16,11 @@ def default_cache_path() -> Path:
     return Path(base) / "advice.sqlite"
 
 
-def make_advisor(name: str, cfg: Any, cache: bool | None = None) -> Advisor:
+def make_advisor(name: str, cfg: Any, cache: bool | None = None, process: bool = False) -> Advisor:
     """``local``, ``openai`` or ``oracle`` as configured by a RunConfig ``cfg``.
+
+    ``process``: run the local model in a child process of its own (training: PPO keeps its
+    interpreter and PyTorch threads; see :mod:`pirl.advice.process`).
 
     LLM advisors get the budget (if any) and then the persistent cache in front, so cached
     answers cost nothing. The oracle is not an LLM: it is neither cached nor budgeted (its
@@ -32,7 +36,14 @@ def make_advisor(name: str, cfg: Any, cache: bool | None = None) -> Advisor:
     if name not in ("local", "openai"):
         raise ConfigError(f"advisor {name!r}: allowed values are local, openai, oracle")
     try:
-        advisor = _backend(name, cfg)
+        if process and name == "local":
+            from pirl.advice.process import ProcessAdvisor
+
+            advisor = ProcessAdvisor(
+                functools.partial(_backend, name, cfg), threads=cfg.advisor.local_threads
+            )
+        else:
+            advisor = _backend(name, cfg)
     except (ValueError, OSError) as exc:
         # A missing key, model folder or model file: the user's to fix, said in one line.
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -127,6 +127,9 @@ class AdvisorSettings:
     """CPU threads of the local model."""
     local_batch_size: int = 32
     """Largest batch of prompts per generate call."""
+    local_process: bool = True
+    """Training: run the local model in a child process of its own, so that it competes with
+    PPO for neither the interpreter lock nor PyTorch's process-wide thread count."""
     openai_model: str = "gpt-3.5-turbo"
     """Model name for 'openai'."""
     openai_base_url: str = ""

@@ -74,7 +74,7 @@ def build_pirl_advice(
 
     env_cfg = cfg.env.replace(reward="ewri", llm_weight=True)
     if advisor is None:
-        advisor = make_advisor(cfg.pare.advisor, cfg)
+        advisor = make_advisor(cfg.pare.advisor, cfg, process=cfg.advisor.local_process)
     if probe:
         try:
             probe_call(advisor, env_cfg, cfg.pare.prompt_variant)
