@@ -19,7 +19,12 @@ import torch
 import yaml
 
 from pirl.agents.config import RunConfig
-from pirl.agents.train import git_commit, prepare_run_folder, train_seed_base, write_json
+from pirl.agents.run_folder import (
+    git_commit,
+    prepare_run_folder,
+    train_seed_base,
+    write_json,
+)
 from pirl.env.vec_env import make_vec_env
 from pirl.world.config import UserError
 

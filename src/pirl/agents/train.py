@@ -17,7 +17,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -34,6 +33,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import LABELS
+from pirl.agents.run_folder import git_commit, prepare_run_folder, train_seed_base, write_json
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.wrapper import AdvisorFailing
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
@@ -54,37 +54,7 @@ def env_config_for(method: str, cfg: RunConfig) -> VCPPConfig:
     return cfg.env.replace(reward=reward, llm_weight=method == "pirl")
 
 
-def train_seed_base(seed: int) -> int:
-    """World i of a run with ``seed`` starts from scenario seed ``base + i``.
-
-    Evaluation scenario seeds start at 10**9, so training never sees them.
-    """
-    return 1_000 * seed
-
-
-# -- 1. run folder --------------------------------------------------------------------------
-def prepare_run_folder(out: Path, resume: bool, log: Any = None) -> tuple[Path, dict] | None:
-    """Create ``out`` for a new run, or return the checkpoint to resume from and its state.
-
-    A folder that exists without ``resume`` is an error: runs are never overwritten. A run
-    stopped before its first checkpoint resumes from step 0 (None); a damaged latest
-    checkpoint falls back to the previous complete one.
-    """
-    if resume:
-        if not out.is_dir():
-            raise ConfigError(f"--resume: run folder {out} does not exist")
-        found = checkpoint.load_latest(out / "checkpoints", log)
-        if found is None and log is not None:
-            log(f"resume: no complete checkpoint in {out / 'checkpoints'}; starting from step 0")
-        return found
-    if out.exists():
-        raise ConfigError(
-            f"run folder {out} already exists; pass --resume to continue it or choose --out"
-        )
-    out.mkdir(parents=True)
-    return None
-
-
+# -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------
 # Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
 # `pirl reproduce` does around it and how the physics simulator evaluates it. Everything else
 # that the method uses (PARE and the advisor for PIRL only) must match the run's config.yaml.
@@ -168,32 +138,6 @@ def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[f"{prefix}{key}"] = value
     return out
-
-
-def git_commit() -> str:
-    """The code's git commit (with '-dirty' when modified), or 'unknown'."""
-    root = Path(__file__).resolve().parents[3]
-    try:
-        sha = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True, text=True, timeout=10,
-        ).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return (sha + ("-dirty" if dirty else "")) if sha else "unknown"
-
-
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (temporary file, then rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
-    os.replace(tmp, path)
 
 
 # -- 2. environments ------------------------------------------------------------------------

@@ -366,7 +366,7 @@ def reproduce(
     cores) and evaluation processes (default ``reproduce.workers``). ``ray_address`` sends
     training runs and evaluation episodes to Ray (``pirl[distributed]``).
     """
-    from pirl.agents.train import git_commit
+    from pirl.agents.run_folder import git_commit
     from pirl.evaluate.report import write_report
 
     if advisor not in ("local", "openai", "oracle"):
