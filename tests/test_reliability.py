@@ -356,3 +356,18 @@ def test_small_cli_outputs(tmp_path):
     assert "episodes: 1/1 episodes" in proc.stdout  # progress off a terminal
     assert "nan" not in proc.stdout and "1.000" in proc.stdout
     assert proc.stderr.strip() == ""  # no third-party noise
+
+
+def test_il_resume_refuses_another_method_or_seed(tmp_path):
+    from pirl.agents.imitation import train_il
+    from pirl.world.config import UserError
+
+    cfg = RunConfig.from_yaml(TEST_CFG)
+    run = tmp_path / "il"
+    run.mkdir()
+    (run / "meta.json").write_text(json.dumps({"method": "ppo-sr", "seed": 0}))
+    with pytest.raises(UserError, match="is a ppo-sr run"):
+        train_il(cfg, tmp_path / "expert", run, seed=0, resume=True)
+    (run / "meta.json").write_text(json.dumps({"method": "il", "seed": 0}))
+    with pytest.raises(UserError, match="trained with seed 0; this command gives --seed 3"):
+        train_il(cfg, tmp_path / "expert", run, seed=3, resume=True)

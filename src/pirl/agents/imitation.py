@@ -9,6 +9,7 @@ accuracy is written to ``il_stats.json``.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from pathlib import Path
@@ -67,6 +68,26 @@ def collect_expert(
     return np.concatenate(xs)[:transitions], np.concatenate(ys)[:transitions]
 
 
+def _check_resume(out: Path, seed: int) -> None:
+    """``--resume`` continues the IL run in ``out``: another method or seed is refused."""
+    meta_path = out / "meta.json"
+    if not meta_path.is_file():
+        return  # stopped before it was recorded: nothing to contradict
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(f"--resume: {meta_path} is damaged ({exc})") from None
+    if meta.get("method") != "il":
+        raise UserError(
+            f"--resume: {out} is a {meta.get('method')} run; this command asks for --method il"
+        )
+    if meta.get("seed") != seed:
+        raise UserError(
+            f"--resume: {out} was trained with seed {meta.get('seed')}; this command gives "
+            f"--seed {seed}"
+        )
+
+
 def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: bool = False) -> Path:
     """Collect expert data, fit TabNet, save it in run folder ``out``; returns the model file."""
     from pytorch_tabnet.tab_model import TabNetClassifier
@@ -75,6 +96,8 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
 
     _quiet.install()  # TabNet's "Device used" and "Best weights" warnings
     out, expert = Path(out), Path(expert)
+    if resume:
+        _check_resume(out, seed)
     if resume and (out / TABNET_FILE).is_file():
         return out / TABNET_FILE
     expert_model = load_expert(expert)  # before the run folder exists
