@@ -22,6 +22,9 @@ from pirl.advice.base import Advisor, Answer, error_answer
 
 def _serve(conn: Any, factory: Callable[[], Advisor], threads: int | None) -> None:
     """The child: build the advisor, say who it is, then answer until told to stop."""
+    from pirl import _quiet
+
+    _quiet.install()  # the parent's filters do not reach a spawned child
     if threads:
         import torch
 
