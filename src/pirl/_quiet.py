@@ -27,6 +27,8 @@ _WARNINGS = (
 def install() -> None:
     """Call early (before transformers is imported where possible); safe to call again."""
     os.environ.setdefault("HF_HUB_DISABLE_PROGRESS_BARS", "1")
+    # Plain tqdm bars of third-party code (transformers' GGUF conversion); ours use rich.
+    os.environ.setdefault("TQDM_DISABLE", "1")
     os.environ.setdefault("TRANSFORMERS_VERBOSITY", "error")
     os.environ.setdefault("TRANSFORMERS_NO_ADVISORY_WARNINGS", "1")
     for category, message in _WARNINGS:

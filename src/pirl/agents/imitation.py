@@ -9,6 +9,7 @@ accuracy is written to ``il_stats.json``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -116,22 +117,24 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     known = np.isin(y[valid], np.unique(y_fit))  # TabNet cannot score classes it never saw
     x_valid, y_valid = x[valid][known], y[valid][known]
 
-    clf = TabNetClassifier(seed=seed, verbose=0, device_name="cpu")
-    clf.fit(
-        x_fit,
-        y_fit,
-        eval_set=[(x_valid, y_valid)],
-        eval_name=["valid"],
-        eval_metric=["accuracy"],
-        max_epochs=il.max_epochs,
-        patience=il.patience,
-        batch_size=min(il.batch_size, len(x_fit)),
-        virtual_batch_size=min(128, il.batch_size, len(x_fit)),
-        drop_last=False,
-    )
-    accuracy = float((clf.predict(x_valid) == y_valid).mean()) if len(y_valid) else 0.0
-    tmp = out / "tabnet.tmp"
-    saved = Path(clf.save_model(str(tmp)))
+    # TabNet prints its early-stopping and save messages: they go to the run's tabnet.log.
+    with open(out / "tabnet.log", "a") as log, contextlib.redirect_stdout(log):
+        clf = TabNetClassifier(seed=seed, verbose=0, device_name="cpu")
+        clf.fit(
+            x_fit,
+            y_fit,
+            eval_set=[(x_valid, y_valid)],
+            eval_name=["valid"],
+            eval_metric=["accuracy"],
+            max_epochs=il.max_epochs,
+            patience=il.patience,
+            batch_size=min(il.batch_size, len(x_fit)),
+            virtual_batch_size=min(128, il.batch_size, len(x_fit)),
+            drop_last=False,
+        )
+        accuracy = float((clf.predict(x_valid) == y_valid).mean()) if len(y_valid) else 0.0
+        tmp = out / "tabnet.tmp"
+        saved = Path(clf.save_model(str(tmp)))
     os.replace(saved, out / TABNET_FILE)
     shutil.rmtree(tmp, ignore_errors=True)
     stats = {
