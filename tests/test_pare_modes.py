@@ -34,6 +34,7 @@ from pirl.env import make_vec_env
 from pirl.env.observation import obs_size
 from pirl.pare.wrapper import AdvisorFailing, PAREVecEnv
 from pirl.world.config import UserError
+from test_pare_wrapper import SlowOracle  # the real oracle with an LLM's latency
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
@@ -175,15 +176,6 @@ def test_student_gate_keeps_steps_unshaped_until_agreement(tmp_path):
         assert all(i["pare"]["status"] == "missing" and i["pare"]["f_llm"] == 0 for i in infos)
     assert pare.stats.as_dict()["steps_unshaped"] == 160
     pare.close()
-
-
-class SlowOracle(OracleAdvisor):
-    def __init__(self, delay: float) -> None:
-        self.delay = delay
-
-    def advise(self, prompts, views=None):
-        time.sleep(self.delay)
-        return super().advise(prompts, views)
 
 
 def test_async_drops_answers_about_ended_episodes():
