@@ -51,7 +51,7 @@ def test_same_seed_same_model(tmp_path):
 
 
 def test_ctrl_c_then_resume_matches_an_uninterrupted_run(tmp_path):
-    steps = "6144"
+    steps = "16384"  # long enough that Ctrl-C lands mid-run on a fast, idle machine
     cmd = [
         sys.executable, "-m", "pirl", "train", "--method", "ppo-ewri", "--config",
         str(TEST_CFG), "--seed", "2", "--steps", steps,
