@@ -57,7 +57,14 @@ def test_ctrl_c_then_resume_matches_an_uninterrupted_run(tmp_path):
         str(TEST_CFG), "--seed", "2", "--steps", steps,
     ]  # fmt: skip
     out = tmp_path / "interrupted"
-    proc = subprocess.Popen([*cmd, "--out", str(out)], stdout=subprocess.PIPE, text=True)
+    # A shell that starts the suite in the background ignores SIGINT, and children inherit
+    # that; a user's terminal does not: give the child the terminal's default.
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     latest = out / "checkpoints" / "LATEST"
     deadline = time.time() + 240
     while time.time() < deadline:
