@@ -46,6 +46,27 @@ _FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
 _CHUNK = 500  # SQLite host parameters per query, well under every build's limit
 
 
+def connect_wal(path: Path, timeout_s: float, schema: list[str]) -> sqlite3.Connection:
+    """An autocommit SQLite connection in WAL mode that several processes can share, with
+    ``schema`` statements applied (folder created if missing)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    conn = sqlite3.connect(path, timeout=timeout_s, isolation_level=None, check_same_thread=False)
+    conn.execute(f"PRAGMA busy_timeout = {int(timeout_s * 1000)}")
+    deadline = time.monotonic() + timeout_s
+    while True:  # switching to WAL needs a moment alone with the file
+        try:
+            conn.execute("PRAGMA journal_mode = WAL")
+            conn.execute("PRAGMA synchronous = NORMAL")
+            for statement in schema:
+                conn.execute(statement)
+            return conn
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                conn.close()
+                raise
+            time.sleep(0.05)
+
+
 def cache_key(advisor: str, model: str, settings: str, prompt: str) -> str:
     """The cache key of one prompt: SHA-256 hex of the four parts."""
     payload = json.dumps([advisor, model, settings, prompt], ensure_ascii=False)
@@ -92,25 +113,8 @@ class CachedAdvisor(Advisor):
     def _connection(self) -> sqlite3.Connection:
         if self._conn is not None and self._pid == os.getpid():
             return self._conn
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        conn = sqlite3.connect(
-            self.path, timeout=self.timeout_s, isolation_level=None, check_same_thread=False
-        )
-        conn.execute(f"PRAGMA busy_timeout = {int(self.timeout_s * 1000)}")
-        deadline = time.monotonic() + self.timeout_s
-        while True:  # switching to WAL needs a moment alone with the file
-            try:
-                conn.execute("PRAGMA journal_mode = WAL")
-                conn.execute("PRAGMA synchronous = NORMAL")
-                conn.execute(_SCHEMA)
-                break
-            except sqlite3.OperationalError as exc:
-                if "locked" not in str(exc) or time.monotonic() > deadline:
-                    conn.close()
-                    raise
-                time.sleep(0.05)
-        self._conn, self._pid = conn, os.getpid()
-        return conn
+        self._conn, self._pid = connect_wal(self.path, self.timeout_s, [_SCHEMA]), os.getpid()
+        return self._conn
 
     def _lookup(self, keys: list[str]) -> dict[str, Answer]:
         found: dict[str, Answer] = {}

@@ -23,6 +23,7 @@ and everything that changes its answers or the features.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import io
 import json
@@ -39,6 +40,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from pirl.advice.cache import connect_wal
 from pirl.advice.recommendation import Recommendation
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
@@ -105,18 +107,18 @@ def default_dataset_path() -> Path:
     return Path(base) / "student.sqlite"
 
 
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS samples (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    teacher TEXT NOT NULL,
-    features BLOB NOT NULL,
-    labels TEXT NOT NULL,
-    source TEXT NOT NULL,
-    t INTEGER NOT NULL,
-    created REAL NOT NULL
-);
-CREATE INDEX IF NOT EXISTS samples_teacher ON samples (teacher, id);
-"""
+_SCHEMA = [
+    """CREATE TABLE IF NOT EXISTS samples (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        teacher TEXT NOT NULL,
+        features BLOB NOT NULL,
+        labels TEXT NOT NULL,
+        source TEXT NOT NULL,
+        t INTEGER NOT NULL,
+        created REAL NOT NULL
+    )""",
+    "CREATE INDEX IF NOT EXISTS samples_teacher ON samples (teacher, id)",
+]
 
 
 class TeacherDataset:
@@ -135,13 +137,8 @@ class TeacherDataset:
 
     def _connection(self) -> sqlite3.Connection:
         if self._conn is None or self._pid != os.getpid():
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            conn = sqlite3.connect(
-                self.path, timeout=self.timeout_s, isolation_level=None, check_same_thread=False
-            )
-            conn.execute("PRAGMA journal_mode=WAL")
-            conn.executescript(_SCHEMA)
-            self._conn, self._pid = conn, os.getpid()
+            self._conn = connect_wal(self.path, self.timeout_s, _SCHEMA)
+            self._pid = os.getpid()
         return self._conn
 
     def add(
@@ -376,7 +373,7 @@ class Student:
             "lr": self.lr,
             "batch_size": self.batch_size,
             "net": {k: v.clone() for k, v in self.net.state_dict().items()},
-            "opt": _clone(self.opt.state_dict()),
+            "opt": copy.deepcopy(self.opt.state_dict()),
             "gen": self.gen.get_state(),
             "last_id": self.last_id,
             "ids": self._ids.copy(),
@@ -435,16 +432,6 @@ class Student:
         )  # fmt: skip
         student.load_state_dict(state, dataset, strict=False)
         return student
-
-
-def _clone(obj: Any) -> Any:
-    if isinstance(obj, torch.Tensor):
-        return obj.clone()
-    if isinstance(obj, dict):
-        return {k: _clone(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_clone(v) for v in obj]
-    return obj
 
 
 __all__ = [
