@@ -159,3 +159,14 @@ def csv_rows(path: Path):
 
     with open(path, newline="") as fh:
         yield from csv.DictReader(fh)
+
+
+def test_report_says_how_much_advice_shaped_each_pirl_run(reproduced):
+    _, out, report, _ = reproduced
+    table = (report.parent / "table.md").read_text()
+    assert "How much advice shaped each PIRL run" in table
+    stats = json.loads((out / "runs" / "pirl-oracle-s0" / "advisor_stats.json").read_text())
+    row = next(line for line in table.splitlines() if line.startswith("| pirl-oracle-s0 |"))
+    assert stats["label"] in row
+    shaped = (stats["steps_student"] + stats["steps_teacher"]) / stats["steps"]
+    assert f"{1 - shaped:.0%}" in row  # the unshaped share is printed

@@ -193,6 +193,44 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
     return "\n".join(lines) + "\n"
 
 
+def advice_table(advisor_stats: dict[str, Any] | None) -> str:
+    """How much of each PIRL run the advice really shaped (from its ``advisor_stats.json``).
+
+    A PIRL row in the tables above is PPO-EWRI wherever its steps were unshaped (the student
+    below its gate, failed answers, a spent budget): this table says how often.
+    """
+    runs = {
+        name: s for name, s in (advisor_stats or {}).items() if isinstance(s, dict) and "steps" in s
+    }
+    if not runs:
+        return ""
+    lines = [
+        "### How much advice shaped each PIRL run (training)",
+        "",
+        "| run | label | shaped by the student | by the teacher | unshaped | mean staleness "
+        "(steps) | teacher calls per env-step | student agreement (majority) | budget spent "
+        "at step |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, s in sorted(runs.items()):
+        steps = max(1, int(s["steps"]))
+        teacher = s.get("steps_teacher", s.get("steps_fresh", 0) + s.get("steps_stale", 0))
+        unshaped = s.get("steps_unshaped", s.get("steps_missing", 0))
+        agreement = (
+            f"{s['student_agreement']:.2f} ({s['student_majority']:.2f})"
+            if s.get("mode") == "student"
+            else "-"
+        )
+        spent = s.get("budget_exhausted_at_step", -1)
+        lines.append(
+            f"| {name} | {s.get('label', '')} | {s.get('steps_student', 0) / steps:.0%} | "
+            f"{teacher / steps:.0%} | {unshaped / steps:.0%} | "
+            f"{s.get('mean_staleness', 0.0):.1f} | {s.get('teacher_calls_per_step', 0.0):.4f} | "
+            f"{agreement} | {spent if spent >= 0 else 'not spent'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def improvement_table(records: list[dict[str, Any]], act: str) -> str:
     """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
     with the stratified bootstrap 95% interval (rliable)."""
@@ -430,6 +468,7 @@ def write_report(
             "docs/results.md).",
             "",
             *blocks,
+            advice_table(advisor_stats),
             improvement,
             camera,
             "## Secondary: spread over episodes",
