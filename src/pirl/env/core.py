@@ -37,7 +37,7 @@ def _make_step_kernel(parallel: bool):
     def kernel(
         actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
         blk_total, bx, by, obstacles, pf, pi, buf, terms, flags, weights, rewards, capacity,
-        window, obs,
+        window, obs, masks,
     ):  # fmt: skip
         for e in range(actions.shape[0]):
             if actions[e] < 0 or actions[e] >= N_ACTIONS:
@@ -56,6 +56,7 @@ def _make_step_kernel(parallel: bool):
                 e, ints, energy, capacity, pi[PI_STEP_LIMIT], blocked, coverable, views,
                 blk_todo, blk_total, window, obs,
             )  # fmt: skip
+            D.action_mask(e, ints, blocked, pi, masks)
             ended += flags[e, F_TERMINATED] | flags[e, F_TRUNCATED]
         return ended
 
@@ -76,6 +77,9 @@ class EnvCore:
         self.weights = np.zeros((num, len(REWARD_TERMS)), dtype=np.float64)
         self.rewards = np.zeros(num, dtype=np.float64)
         self.obs = np.zeros((num, obs_size(cfg.obs_window, cfg.obs_global)), dtype=np.float32)
+        # Which actions can change something in each world's current state (written with the
+        # observation after every reset and step; see dynamics.action_mask).
+        self.masks = np.ones((num, N_ACTIONS), dtype=np.bool_)
         self._all = np.arange(num, dtype=np.int64)
         self.ended = -1  # worlds ended on the last step; -1 = unknown (read the flags)
 
@@ -104,12 +108,18 @@ class EnvCore:
             actions, w.ints, w.energy, w.rng, w.blocked, w.coverable, w.views, w.redmask,
             w.visits, w.blk_todo, w.blk_total, w.bx, w.by, w.obstacles, w.pf, w.pi, w.buf,
             w.terms, w.flags, self.weights, self.rewards, w.capacity, self.cfg.obs_window,
-            self.obs,
+            self.obs, self.masks,
         )  # fmt: skip
         if ended < 0:
             raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
         self.ended = ended
         return ended
+
+    def refresh_masks(self) -> None:
+        """Recompute every world's valid actions (after its state was loaded from elsewhere,
+        e.g. a checkpoint)."""
+        w = self.world
+        D.action_masks(self._all, w.ints, w.blocked, w.pi, self.masks)
 
     def _observe(self, worlds: np.ndarray) -> None:
         w = self.world
@@ -117,6 +127,7 @@ class EnvCore:
             worlds, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
             w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
         )  # fmt: skip
+        D.action_masks(worlds, w.ints, w.blocked, w.pi, self.masks)
 
     @property
     def terminated(self) -> np.ndarray:
@@ -134,7 +145,9 @@ class EnvCore:
         if self.ended:  # most steps end no episode: skip the search
             done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
             metrics = {int(e): episode_metrics(w, int(e)) for e in done}
-        return InfoSnapshot(w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics)
+        return InfoSnapshot(
+            w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics, self.masks
+        )
 
     def infos(self, worlds: list[int] | None = None, lazy: bool = False) -> list[dict[str, Any]]:
         """The ``info`` dict of each world (all by default), as of the last step or reset.

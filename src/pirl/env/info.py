@@ -33,6 +33,7 @@ INFO_KEYS = frozenset(
         "camera",
         "steps",
         "episode_metrics",
+        "action_mask",
     }
 )
 
@@ -40,7 +41,9 @@ INFO_KEYS = frozenset(
 class InfoSnapshot:
     """Copies of the arrays an info is made of, at one step."""
 
-    __slots__ = ("ints", "terms", "weights", "flags", "energy", "capacity", "metrics", "extras")
+    __slots__ = (
+        "ints", "terms", "weights", "flags", "energy", "capacity", "metrics", "masks", "extras",
+    )  # fmt: skip
 
     def __init__(
         self,
@@ -51,11 +54,14 @@ class InfoSnapshot:
         energy: np.ndarray,
         capacity: float,
         metrics: dict[int, dict[str, float]],
+        masks: np.ndarray | None = None,
     ) -> None:
         self.ints, self.terms, self.weights = ints.copy(), terms.copy(), weights.copy()
         self.flags, self.energy = flags.copy(), energy.copy()
         self.capacity = capacity
         self.metrics = metrics
+        # None where the caller has no valid-action rule (then info has no "action_mask").
+        self.masks = None if masks is None else masks.copy()
         # Wrappers add their own lazily built keys here: key -> function of the world index.
         self.extras: dict[str, Callable[[int], Any]] = {}
 
@@ -78,6 +84,9 @@ class InfoSnapshot:
             "camera": (r[D.TILT], r[D.PAN], r[D.ZOOM] / 10.0),
             "steps": r[D.STEPS],
         }
+        if self.masks is not None:
+            # A tuple: info dicts are compared and written as JSON (action_masks() gives arrays).
+            info["action_mask"] = tuple(self.masks[e].tolist())
         if e in self.metrics:
             info["episode_metrics"] = self.metrics[e]
         for key, build in self.extras.items():
@@ -116,6 +125,8 @@ class InfoSnapshot:
         camera[:, 2] /= 10.0
         put(out, "camera", camera)
         put(out, "steps", r[:, D.STEPS].copy())
+        if self.masks is not None:
+            put(out, "action_mask", self.masks.copy())
         ended = {e: m for e, m in self.metrics.items() if every[e]}
         if ended:
             mask = np.zeros(n, dtype=np.bool_)

@@ -45,6 +45,8 @@ class VCPPEnv(gym.Env):
     9 pan-15, 10 zoom+0.1, 11 zoom-0.1. A move into an obstacle or out of the grid leaves the UAV
     in place and is a collision; a camera action at its limit changes nothing. Tilt is in
     [0, 90] degrees (90 looks straight down), pan in [-90, 90] (0 = +x), zoom in [0.5, 2.0].
+    ``action_masks()`` and ``info["action_mask"]`` give the actions that can change something
+    (12 booleans; never all False), for masked policies such as sb3-contrib's ``MaskablePPO``.
 
     ## Observation Space
     ``Box(0, 1, (2*W*W + G*G + 11,), float32)`` with ``W = obs_window`` (11) and
@@ -137,6 +139,12 @@ class VCPPEnv(gym.Env):
             bool(self.core.truncated[0]),
             self.core.infos()[0],
         )
+
+    def action_masks(self) -> np.ndarray:
+        """The 12 actions that can change something now (``info["action_mask"]`` too): moves
+        that stay inside the grid and out of obstacles, camera actions not at their limit.
+        The method sb3-contrib's ``MaskablePPO`` looks for."""
+        return self.core.masks[0].copy()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":

@@ -90,6 +90,11 @@ class VCPPVecEnv(VecEnv):
                 self.reset_infos[e] = info
         return obs, rewards, dones, infos
 
+    def action_masks(self) -> np.ndarray:
+        """``(num_envs, 12)`` booleans: the actions that can change something in each world's
+        current state (after auto-reset: the new episode's). See ``VCPPEnv.action_masks``."""
+        return self.core.masks.copy()
+
     def close(self) -> None:
         return None
 
@@ -106,8 +111,12 @@ class VCPPVecEnv(VecEnv):
     def env_method(
         self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
     ) -> list[Any]:
+        worlds = self._indices_list(indices)
+        if method_name == "action_masks":
+            # sb3-contrib asks every world for its mask at every step: one batched copy.
+            return list(self.core.masks[worlds])
         method = getattr(self, method_name)
-        return [method(*method_args, **method_kwargs) for _ in self._indices_list(indices)]
+        return [method(*method_args, **method_kwargs) for _ in worlds]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
         return [False for _ in self._indices_list(indices)]

@@ -142,6 +142,11 @@ class VCPPVectorEnv(VectorEnv):
         info = LazyVectorInfo(core.infos_snapshot())
         return self._obs(), core.rewards.copy(), terminated, truncated, info
 
+    def action_masks(self) -> np.ndarray:
+        """``(num_envs, 12)`` booleans: the actions that can change something in each world now
+        (also ``info["action_mask"]``). See ``VCPPEnv.action_masks``."""
+        return self.core.masks.copy()
+
     def _obs(self) -> np.ndarray:
         return self.core.obs.copy() if self.copy else self.core.obs
 

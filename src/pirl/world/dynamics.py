@@ -10,6 +10,17 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from pirl.world.config import (
+    PAN_MAX,
+    PAN_MIN,
+    PAN_STEP,
+    TILT_MAX,
+    TILT_MIN,
+    TILT_STEP,
+    ZOOM_MAX10,
+    ZOOM_MIN10,
+    ZOOM_STEP10,
+)
 from pirl.world.footprint import footprint_cells
 
 # Columns of the per-world integer table.
@@ -123,17 +134,45 @@ def camera_action(e, a, ints):
     zoom; at a limit the setting holds. Counts the camera action."""
     ints[e, CAM_ACTIONS] += 1
     if a == TILT_PLUS:
-        ints[e, TILT] = min(90, ints[e, TILT] + 5)
+        ints[e, TILT] = min(TILT_MAX, ints[e, TILT] + TILT_STEP)
     elif a == TILT_MINUS:
-        ints[e, TILT] = max(0, ints[e, TILT] - 5)
+        ints[e, TILT] = max(TILT_MIN, ints[e, TILT] - TILT_STEP)
     elif a == PAN_PLUS:
-        ints[e, PAN] = min(90, ints[e, PAN] + 15)
+        ints[e, PAN] = min(PAN_MAX, ints[e, PAN] + PAN_STEP)
     elif a == PAN_MINUS:
-        ints[e, PAN] = max(-90, ints[e, PAN] - 15)
+        ints[e, PAN] = max(PAN_MIN, ints[e, PAN] - PAN_STEP)
     elif a == ZOOM_PLUS:
-        ints[e, ZOOM] = min(20, ints[e, ZOOM] + 1)
+        ints[e, ZOOM] = min(ZOOM_MAX10, ints[e, ZOOM] + ZOOM_STEP10)
     else:
-        ints[e, ZOOM] = max(5, ints[e, ZOOM] - 1)
+        ints[e, ZOOM] = max(ZOOM_MIN10, ints[e, ZOOM] - ZOOM_STEP10)
+
+
+@numba.njit(cache=True, inline="always")
+def action_mask(e, ints, blocked, pi, out):
+    """Write into ``out[e]`` which of world e's 12 actions can change something.
+
+    A move is valid when its cell lies inside the grid and is free; a camera action when its
+    setting is not already at the limit it pushes towards. An invalid action is a collision or
+    a camera action that holds: it only spends energy, and a policy that repeats it loops.
+    At least one tilt action is always valid, so a mask never rules out every action.
+    """
+    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
+    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
+    for a in range(N_MOVES):
+        out[e, a] = _free(blocked, e, x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2], sx, sy, sz)
+    out[e, TILT_PLUS] = ints[e, TILT] < TILT_MAX
+    out[e, TILT_MINUS] = ints[e, TILT] > TILT_MIN
+    out[e, PAN_PLUS] = ints[e, PAN] < PAN_MAX
+    out[e, PAN_MINUS] = ints[e, PAN] > PAN_MIN
+    out[e, ZOOM_PLUS] = ints[e, ZOOM] < ZOOM_MAX10
+    out[e, ZOOM_MINUS] = ints[e, ZOOM] > ZOOM_MIN10
+
+
+@numba.njit(cache=True)
+def action_masks(worlds, ints, blocked, pi, out):
+    """:func:`action_mask` of each world index in ``worlds`` (after a reset)."""
+    for k in range(worlds.shape[0]):
+        action_mask(worlds[k], ints, blocked, pi, out)
 
 
 @numba.njit(cache=True, inline="always")
