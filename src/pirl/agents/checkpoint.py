@@ -71,6 +71,7 @@ def restore(
     for name, value in state["world"].items():
         getattr(world, name)[...] = value
     core.weights[...] = state["weights"]
+    core.refresh_masks()  # masks are derived from the world state, not saved
     venv._rngs = copy.deepcopy(state["rngs"])
     monitor.episode_returns = state["monitor"]["episode_returns"].copy()
     monitor.episode_lengths = state["monitor"]["episode_lengths"].copy()

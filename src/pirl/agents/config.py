@@ -51,6 +51,10 @@ class PPOSettings:
     """Threads for PyTorch (the envs and an LLM share the cores)."""
     device: str = "auto"
     """'auto' (CUDA when present, else CPU), 'cpu' or 'cuda'."""
+    action_masking: bool = False
+    """Train with sb3-contrib's MaskablePPO on the env's valid-action masks (camera actions at
+    their limit and moves out of the grid or into obstacles are never chosen); the trained
+    policy acts on the same masks in every evaluation. False is the paper's action space."""
 
 
 @dataclass(frozen=True)
@@ -115,6 +119,10 @@ class PareSettings:
     failed or did not parse (0 = never stop)."""
     failure_window: int = 200
     """Teacher answers in the rolling failure rate."""
+    min_shaped: float = 0.5
+    """A PIRL run with less than this share of its steps shaped (by the student or the
+    teacher) ends with a warning, and its label in summaries, tables, figures and the report
+    carries ``unshaped N%``: it trained mostly as PPO-EWRI."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +146,13 @@ class AdvisorSettings:
     """Name of the environment variable holding the key."""
     openai_timeout_s: float = 30.0
     """Per-request timeout."""
+    openai_deadline_s: float = 60.0
+    """Longest time one batch of prompts may take, retries included; prompts unanswered by
+    then count as failed (a server that accepts connections but never answers then stops a
+    run through pare.max_failure_rate within a few minutes)."""
+    probe_timeout_s: float = 30.0
+    """Longest wait for the probe call that checks the advisor before a run starts (and for
+    the answer of pirl advise)."""
     openai_max_retries: int = 4
     """Retries with backoff on rate limits and dropped connections."""
     openai_concurrency: int = 8
@@ -298,6 +313,9 @@ def _validate(cfg: RunConfig) -> None:
         "reproduce.llm_only_episodes": cfg.reproduce.llm_only_episodes,
         "reproduce.workers": cfg.reproduce.workers, "reproduce.gif_every": cfg.reproduce.gif_every,
         "reproduce.physics_episodes": cfg.reproduce.physics_episodes,
+        "advisor.openai_timeout_s": cfg.advisor.openai_timeout_s,
+        "advisor.openai_deadline_s": cfg.advisor.openai_deadline_s,
+        "advisor.probe_timeout_s": cfg.advisor.probe_timeout_s,
     }  # fmt: skip
     for key, value in positive.items():
         if value <= 0:
@@ -317,6 +335,7 @@ def _validate(cfg: RunConfig) -> None:
         ("pare.oracle_teacher_rate", pare.oracle_teacher_rate),
         ("pare.student_gate", pare.student_gate),
         ("pare.max_failure_rate", pare.max_failure_rate),
+        ("pare.min_shaped", pare.min_shaped),
     ):
         if not 0 <= value <= 1:
             raise ConfigError(f"{key}={value!r}: must be in [0, 1]")

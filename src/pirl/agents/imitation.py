@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 import yaml
+from sb3_contrib import MaskablePPO
 
 from pirl.agents.config import RunConfig
 from pirl.agents.run_folder import (
@@ -36,7 +37,7 @@ TABNET_FILE = "tabnet.zip"
 def load_expert(expert_run: Path) -> Any:
     """The expert's PPO model, checked before an IL run folder is made: the run must exist,
     be a finished PPO run and hold a model that loads."""
-    from pirl.agents.loading import PPOPolicy, model_file, run_meta
+    from pirl.agents.loading import PPOPolicy, model_file, run_masked, run_meta
 
     expert_run = Path(expert_run)
     if not expert_run.is_dir():
@@ -47,22 +48,26 @@ def load_expert(expert_run: Path) -> Any:
             f"--expert {expert_run} is a {method} run, not a finished PPO run "
             "(ppo-ewri, ppo-sr or pirl)"
         )
-    return PPOPolicy(model_file(expert_run), method).model
+    return PPOPolicy(model_file(expert_run), method, masked=run_masked(expert_run)).model
 
 
 def collect_expert(
     expert_run: Path | Any, cfg: RunConfig, transitions: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """(observations, actions) of the expert (a run folder or its loaded model) acting
-    deterministically on the training world."""
+    deterministically on the training world (on the valid actions, when it trained masked)."""
     model = load_expert(expert_run) if isinstance(expert_run, str | Path) else expert_run
     venv = make_vec_env(
         cfg.ppo.n_envs, seed=train_seed_base(seed) + 500, config=cfg.env.replace(reward="ewri")
     )
+    masked = isinstance(model, MaskablePPO)
     obs = venv.reset()
     xs, ys = [], []
     while sum(len(x) for x in xs) < transitions:
-        actions, _ = model.predict(obs, deterministic=True)
+        if masked:
+            actions, _ = model.predict(obs, deterministic=True, action_masks=venv.action_masks())
+        else:
+            actions, _ = model.predict(obs, deterministic=True)
         xs.append(obs.copy())
         ys.append(np.asarray(actions, dtype=np.int64))
         obs, _, _, _ = venv.step(actions)

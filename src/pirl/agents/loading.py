@@ -50,6 +50,9 @@ class LearnedPolicy(Policy):
     """
 
     act_mode = "greedy"
+    # Trained with valid-action masks (the run's ppo.action_masking): acts on masked
+    # probabilities too, as MaskablePPO's distribution does (invalid actions get 0).
+    masked = False
     _rng: np.random.Generator | None = None
 
     def set_act(self, mode: str) -> LearnedPolicy:
@@ -63,8 +66,19 @@ class LearnedPolicy(Policy):
         """Action probabilities, shape (batch, N_ACTIONS)."""
         raise NotImplementedError
 
-    def act_batch(self, obs: np.ndarray, rngs: list[np.random.Generator] | None) -> np.ndarray:
+    def act_batch(
+        self,
+        obs: np.ndarray,
+        rngs: list[np.random.Generator] | None,
+        masks: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """One action per row of ``obs``; ``masks`` (batch, N_ACTIONS) are the valid actions,
+        applied when the policy is :attr:`masked`."""
         probs = self.probabilities(np.asarray(obs, dtype=np.float32))
+        if self.masked:
+            if masks is None:
+                raise ValueError(f"{self.label} was trained with action masks; give them")
+            probs = mask_probabilities(probs, masks)
         if self.act_mode == "greedy":
             return probs.argmax(axis=1)
         if rngs is None:
@@ -74,7 +88,19 @@ class LearnedPolicy(Policy):
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         if self._rng is None:
             self._rng = act_rng(None)
-        return int(self.act_batch(np.asarray(obs)[None], [self._rng])[0])
+        mask = info.get("action_mask") if self.masked else None
+        masks = None if mask is None else np.asarray(mask, dtype=bool)[None]
+        return int(self.act_batch(np.asarray(obs)[None], [self._rng], masks)[0])
+
+
+def mask_probabilities(probs: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """``probs`` restricted to the valid actions and renormalised per row (what sb3-contrib's
+    MaskableCategorical computes); a row whose valid actions all have probability 0 becomes
+    uniform over them."""
+    masked = np.where(np.asarray(masks, dtype=bool), probs, 0.0)
+    total = masked.sum(axis=1, keepdims=True)
+    uniform = masks / np.maximum(1, masks.sum(axis=1, keepdims=True))
+    return np.where(total > 0, masked / np.where(total > 0, total, 1.0), uniform)
 
 
 def sample_actions(probs: np.ndarray, rngs: list[np.random.Generator]) -> np.ndarray:
@@ -88,9 +114,15 @@ def sample_actions(probs: np.ndarray, rngs: list[np.random.Generator]) -> np.nda
 class PPOPolicy(LearnedPolicy):
     """A trained Stable-Baselines3 PPO model (greedy unless :meth:`set_act` says otherwise)."""
 
-    def __init__(self, model_path: Path, name: str, device: str = "cpu") -> None:
-        from stable_baselines3 import PPO
+    def __init__(
+        self, model_path: Path, name: str, device: str = "cpu", masked: bool = False
+    ) -> None:
+        if masked:
+            from sb3_contrib import MaskablePPO as PPO
+        else:
+            from stable_baselines3 import PPO
 
+        self.masked = masked
         try:
             self.model = PPO.load(model_path, device=device)
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
@@ -114,9 +146,10 @@ class TabNetPolicy(LearnedPolicy):
     name = "il"
     label = "IL"
 
-    def __init__(self, model_path: Path) -> None:
+    def __init__(self, model_path: Path, masked: bool = False) -> None:
         from pytorch_tabnet.tab_model import TabNetClassifier
 
+        self.masked = masked
         self.model = TabNetClassifier(device_name="cpu")
         try:
             self.model.load_model(str(model_path))
@@ -213,6 +246,19 @@ def load_policy(
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")
     method = run_method(run)
     model = model_file(run)
+    masked = run_masked(run)
     if method == "il":
-        return TabNetPolicy(model).set_act(act)
-    return PPOPolicy(model, method, device).set_act(act)
+        return TabNetPolicy(model, masked).set_act(act)
+    return PPOPolicy(model, method, device, masked).set_act(act)
+
+
+def run_masked(run: Path) -> bool:
+    """Whether a finished run trained with valid-action masks (its own config.yaml says;
+    runs made before masking existed did not)."""
+    import yaml
+
+    try:
+        cfg = yaml.safe_load((Path(run) / "config.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError):
+        return False
+    return bool((cfg.get("ppo") or {}).get("action_masking", False))

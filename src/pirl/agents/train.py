@@ -191,11 +191,19 @@ def pick_device(setting: str) -> str:
 
 def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path | None) -> PPO:
     """SB3 PPO with separate MLPs for actor and critic (the observation is a flat vector of
-    local maps, a coarse global map and scalars, so an MLP reads it directly)."""
+    local maps, a coarse global map and scalars, so an MLP reads it directly).
+
+    With ``ppo.action_masking`` it is sb3-contrib's ``MaskablePPO``, which asks the env stack
+    for ``action_masks()`` at every step (PARE and VecMonitor pass the call through)."""
     p = cfg.ppo
     lr = p.learning_rate
     learning_rate = (lambda progress: progress * lr) if p.lr_schedule == "linear" else lr
-    return PPO(
+    algo = PPO
+    if p.action_masking:
+        from sb3_contrib import MaskablePPO
+
+        algo = MaskablePPO
+    return algo(
         "MlpPolicy",
         env,
         learning_rate=learning_rate,
@@ -409,6 +417,10 @@ def train(
     log = print if show_progress else (lambda _m: None)
     env_config_for(method, cfg)  # validates the method before touching the disk
     if resume:
+        from pirl.agents.run_folder import lock_folder
+
+        if out.is_dir():
+            lock_folder(out)  # first: a second writer is refused before it reads anything
         cfg = check_resume(out, method, cfg, seed, log)
         done = _finished_steps(out)
         if done is not None and done >= cfg.train.total_steps:
@@ -427,7 +439,7 @@ def train(
         from pirl.agents.pirl_advice import build_pirl_advice
 
         # Before the folder exists: a dead server or a wrong student leaves nothing behind.
-        advice = build_pirl_advice(cfg, advisor, student, probe=True, seed=seed)
+        advice = build_pirl_advice(cfg, advisor, student, probe=True, seed=seed, log=_warn)
         advisor = advice.advisor
     found = prepare_run_folder(out, resume, log)
     ckpt = found[0] if found is not None else None
@@ -483,11 +495,26 @@ def train(
     model.save(tmp)
     os.replace(tmp, final)
     if stack.pare is not None:
-        write_json(out / "advisor_stats.json", _advisor_stats(stack.pare, advisor))
+        from pirl.agents.pirl_advice import unshaped_warning
+
+        stats = _advisor_stats(stack.pare, advisor)
+        write_json(out / "advisor_stats.json", stats)
+        # A mostly unshaped PIRL run is PPO-EWRI under PIRL's name: say so, and why.
+        warning = unshaped_warning(stats, cfg.pare.min_shaped, cfg.pare.student_gate)
+        if warning:
+            _warn(warning)
     meta.update(complete=True, timesteps=int(model.num_timesteps))
     write_json(out / "meta.json", meta)
     stack.env.close()
+    from pirl.agents.run_folder import release_folder
+
+    release_folder(out)
     return final
+
+
+def _warn(line: str) -> None:
+    """Warnings go to stderr, with or without the progress display."""
+    print(line, file=sys.stderr, flush=True)
 
 
 class TrainingStopped(Exception):
@@ -508,7 +535,7 @@ class TrainingInterrupted(Exception):
 
 
 def _advisor_stats(pare: Any, advisor: Any) -> dict[str, Any]:
-    stats = pare.stats.as_dict()
+    stats = pare.settle().as_dict()  # answers still in flight at the end are counted too
     stats["advisor"] = getattr(advisor, "label", str(advisor))
     for attr in ("hits", "misses", "calls", "tokens"):
         value = getattr(advisor, attr, None)

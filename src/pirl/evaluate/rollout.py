@@ -67,7 +67,7 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
     actions = np.zeros(n, dtype=np.int64)
     while active.any():
         live = np.flatnonzero(active)
-        actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live])
+        actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live], core.masks[live])
         if core.step(actions):
             flags = core.world.flags
             ended = live[(flags[live, D.F_TERMINATED] | flags[live, D.F_TRUNCATED]) != 0]
