@@ -40,7 +40,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from pirl.advice.cache import connect_wal
+from pirl.advice.cache import open_store
 from pirl.advice.recommendation import Recommendation
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
@@ -97,6 +97,12 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
         env_cfg.max_range, env_cfg.occlusion, env_cfg.obs_window, env_cfg.obs_global,
         FEATURE_VERSION,
     ]  # fmt: skip
+    # Optional observation blocks change the features; the default layout keeps its old keys.
+    parts += [
+        f"{name}={getattr(env_cfg, name)}"
+        for name in ("obs_visits", "obs_target")
+        if getattr(env_cfg, name, False)
+    ]  # fmt: skip
     digest = hashlib.sha256(json.dumps(parts, default=str).encode()).hexdigest()[:16]
     return f"{advisor.name}:{advisor.model}:{digest}"
 
@@ -133,11 +139,23 @@ class TeacherDataset:
         self.timeout_s = timeout_s
         self._conn: sqlite3.Connection | None = None
         self._pid = -1
+        self.in_memory = False
+        """True when the file could not be used and answers live in this process only."""
         self._connection()
 
     def _connection(self) -> sqlite3.Connection:
         if self._conn is None or self._pid != os.getpid():
-            self._conn = connect_wal(self.path, self.timeout_s, _SCHEMA)
+            conn = None
+            if not self.in_memory:
+                conn = open_store(self.path, self.timeout_s, _SCHEMA, "teacher dataset")
+            if conn is None:
+                # Unusable file (said in one line): this process keeps its answers in memory,
+                # so the run goes on; they are not shared and not kept.
+                self.in_memory = True
+                conn = sqlite3.connect(":memory:", isolation_level=None, check_same_thread=False)
+                for statement in _SCHEMA:
+                    conn.execute(statement)
+            self._conn = conn
             self._pid = os.getpid()
         return self._conn
 

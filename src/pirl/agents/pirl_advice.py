@@ -7,6 +7,7 @@ student of another teacher stops with one line and leaves nothing behind.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,11 +64,13 @@ def build_pirl_advice(
     student_path: Path | None = None,
     probe: bool = True,
     seed: int = 0,
+    log: Callable[[str], Any] = print,
 ) -> PirlAdvice:
     """Build (and probe) the teacher, and in student mode the student and its dataset.
 
     ``student_path``: a student written by ``pirl distill`` to start from; its teacher must be
-    the configured one.
+    the configured one. A probe answer that does not parse is a warning (``log``), not an
+    error: training counts such answers, and a server may answer better later.
     """
     from pirl.advice.factory import make_advisor
     from pirl.advice.health import probe as probe_call
@@ -77,10 +80,14 @@ def build_pirl_advice(
         advisor = make_advisor(cfg.pare.advisor, cfg, process=cfg.advisor.local_process)
     if probe:
         try:
-            probe_call(advisor, env_cfg, cfg.pare.prompt_variant)
+            answer = probe_call(
+                advisor, env_cfg, cfg.pare.prompt_variant, cfg.advisor.probe_timeout_s, print
+            )  # "probing ..." goes to stdout: stderr is kept for warnings and the error line
         except UserError:
             advisor.close()
             raise
+        if answer.recommendation is None:
+            log(probe_warning(advisor.label, answer.text, cfg.pare.prompt_variant))
     label = pirl_label(cfg, advisor.label)
     rate = cfg.pare.oracle_teacher_rate if advisor.name == "oracle" else cfg.pare.teacher_rate
     batch = {"oracle": 256, "local": cfg.advisor.local_batch_size}.get(
@@ -92,12 +99,71 @@ def build_pirl_advice(
     return PirlAdvice(advisor, student, dataset, rate, batch, label)
 
 
+def probe_warning(label: str, text: str, prompt_variant: str) -> str:
+    """One line for a probe answer that does not parse, naming the next step."""
+    shown = " ".join(text.split())[:60] or "(empty)"
+    return (
+        f"warning: advisor {label}'s probe answer does not parse ({shown!r}); its answers "
+        f"will not shape PIRL until they do: check it with pirl advise --advisor ... "
+        f"(prompt variant {prompt_variant})"
+    )
+
+
+def shaped_share(stats: dict[str, Any]) -> float:
+    """Share of a PIRL run's steps shaped by advice (student or teacher), from its
+    ``advisor_stats.json``."""
+    steps = int(stats.get("steps") or 0)
+    if steps <= 0:
+        return 0.0
+    unshaped = int(stats.get("steps_unshaped", stats.get("steps_missing", 0)))
+    return max(0.0, 1.0 - unshaped / steps)
+
+
+def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> str | None:
+    """One line when a PIRL run was less than ``min_shaped`` shaped, saying why; else None.
+
+    The reasons come from the run's counters: teacher answers received, unparseable, failed,
+    still in flight at the end, and whether (and when) the student passed its gate.
+    """
+    from pirl.advice.student import MIN_HELDOUT
+
+    shaped = shaped_share(stats)
+    if shaped >= min_shaped:
+        return None
+    ok, bad = int(stats.get("answers_ok", 0)), int(stats.get("answers_unparseable", 0))
+    failed, flight = int(stats.get("answers_failed", 0)), int(stats.get("answers_in_flight", 0))
+    sent = int(stats.get("prompts_sent", stats.get("teacher_calls", 0)))
+    why = [
+        f"teacher sent {sent:,} prompts, answered {ok:,}, unparseable {bad:,}, failed "
+        f"{failed:,}, in flight at the end {flight:,}"
+    ]
+    if stats.get("mode") == "student":
+        passed = int(stats.get("gate_passed_at_step", -1))
+        if passed < 0:
+            why.append(
+                f"student gate never passed (agreement {stats.get('student_agreement', 0):.2f} "
+                f"vs gate {gate:g} on {int(stats.get('student_heldout', 0))} held-out answers; "
+                f"it needs {MIN_HELDOUT})"
+            )
+        else:
+            why.append(f"student gate passed at step {passed:,} of {int(stats['steps']):,}")
+    if bad and not ok:
+        why.append("no answer parsed: check the advisor with pirl advise")
+    if stats.get("budget_exhausted"):
+        why.append(f"budget spent at step {int(stats.get('budget_exhausted_at_step', -1)):,}")
+    return (
+        f"warning: {stats.get('label', 'PIRL')} was {1 - shaped:.0%} unshaped (less than "
+        f"pare.min_shaped {min_shaped:g} shaped), so it trained mostly as PPO-EWRI: "
+        + "; ".join(why)
+    )
+
+
 def make_student(
     cfg: RunConfig, advisor: Any, env_cfg: Any, student_path: Path | None, seed: int = 0
 ) -> tuple[Any, Any]:
     """A new student of ``advisor`` (or the one saved at ``student_path``) and its dataset."""
     from pirl.advice.student import N_EXTRA, Student, TeacherDataset, teacher_key
-    from pirl.env.observation import obs_size
+    from pirl.env.observation import obs_size_for
 
     dataset = TeacherDataset(dataset_path(cfg))
     key = teacher_key(advisor, cfg.pare.prompt_variant, env_cfg)
@@ -116,11 +182,20 @@ def make_student(
                 "(advisor, model, prompt variant and world settings must match)"
             )
         return student, dataset
-    n_features = obs_size(env_cfg.obs_window, env_cfg.obs_global) + N_EXTRA
+    n_features = obs_size_for(env_cfg) + N_EXTRA
     student = Student(
         key, n_features, label=advisor.label, hidden=cfg.pare.student_hidden, seed=seed
     )
     return student, dataset
 
 
-__all__ = ["PirlAdvice", "build_pirl_advice", "dataset_path", "make_student", "pirl_label"]
+__all__ = [
+    "PirlAdvice",
+    "build_pirl_advice",
+    "dataset_path",
+    "make_student",
+    "pirl_label",
+    "probe_warning",
+    "shaped_share",
+    "unshaped_warning",
+]

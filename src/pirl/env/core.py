@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 from pirl.env.info import InfoSnapshot, LazyInfo
-from pirl.env.observation import _observation, build_observations, obs_size
+from pirl.env.observation import _observation, build_observations, obs_extras, obs_size_for
 from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
 from pirl.world.config import REWARD_TERMS, VCPPConfig
@@ -37,7 +37,7 @@ def _make_step_kernel(parallel: bool):
     def kernel(
         actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
         blk_total, bx, by, obstacles, pf, pi, buf, terms, flags, weights, rewards, capacity,
-        window, obs, masks,
+        window, obs, masks, extras,
     ):  # fmt: skip
         for e in range(actions.shape[0]):
             if actions[e] < 0 or actions[e] >= N_ACTIONS:
@@ -54,7 +54,7 @@ def _make_step_kernel(parallel: bool):
             rewards[e] = r
             _observation(
                 e, ints, energy, capacity, pi[PI_STEP_LIMIT], blocked, coverable, views,
-                blk_todo, blk_total, window, obs,
+                blk_todo, blk_total, window, obs, visits, extras,
             )  # fmt: skip
             D.action_mask(e, ints, blocked, pi, masks)
             ended += flags[e, F_TERMINATED] | flags[e, F_TRUNCATED]
@@ -76,7 +76,8 @@ class EnvCore:
         self.world = WorldBatch(cfg, num, parallel)
         self.weights = np.zeros((num, len(REWARD_TERMS)), dtype=np.float64)
         self.rewards = np.zeros(num, dtype=np.float64)
-        self.obs = np.zeros((num, obs_size(cfg.obs_window, cfg.obs_global)), dtype=np.float32)
+        self.obs = np.zeros((num, obs_size_for(cfg)), dtype=np.float32)
+        self.extras = obs_extras(cfg)
         # Which actions can change something in each world's current state (written with the
         # observation after every reset and step; see dynamics.action_mask).
         self.masks = np.ones((num, N_ACTIONS), dtype=np.bool_)
@@ -108,7 +109,7 @@ class EnvCore:
             actions, w.ints, w.energy, w.rng, w.blocked, w.coverable, w.views, w.redmask,
             w.visits, w.blk_todo, w.blk_total, w.bx, w.by, w.obstacles, w.pf, w.pi, w.buf,
             w.terms, w.flags, self.weights, self.rewards, w.capacity, self.cfg.obs_window,
-            self.obs, self.masks,
+            self.obs, self.masks, self.extras,
         )  # fmt: skip
         if ended < 0:
             raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
@@ -125,7 +126,7 @@ class EnvCore:
         w = self.world
         build_observations(
             worlds, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
-            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
+            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs, w.visits, self.extras,
         )  # fmt: skip
         D.action_masks(worlds, w.ints, w.blocked, w.pi, self.masks)
 

@@ -14,27 +14,51 @@ slice                 shape        meaning
 next 11               scalars      x/(X-1), y/(Y-1), z/(Z-1), tilt/90, (pan+90)/180,
                                    (zoom-0.5)/1.5, battery, coverage (VCR so far),
                                    steps left / step limit, blocked above, blocked below
+next W*W (obs_visits) (W, W)       local window: visits of each cell at the UAV's altitude
+                                   this episode, min(v, 3) / 3
+next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered (ground
+                                   plane): (dx/d + 1)/2, (dy/d + 1)/2, min(d, 16)/16; 0.5,
+                                   0.5, 0 when none is left
 ====================  ===========  ==========================================================
+
+The last two blocks are off by default (the paper's observation: 317 values).
 """
 
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 from pirl.world import dynamics as D
+from pirl.world.config import VCPPConfig
 
 N_SCALARS = 11
+N_TARGET = 3
+TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
+# Bits of the ``extras`` argument of the kernels: which optional blocks the observation has.
+EXTRA_VISITS, EXTRA_TARGET = 1, 2
 
 
-def obs_size(window: int, global_side: int) -> int:
+def obs_size(window: int, global_side: int, visits: bool = False, target: bool = False) -> int:
     """Length of the observation vector."""
-    return 2 * window * window + global_side * global_side + N_SCALARS
+    n = 2 * window * window + global_side * global_side + N_SCALARS
+    return n + (window * window if visits else 0) + (N_TARGET if target else 0)
+
+
+def obs_size_for(cfg: VCPPConfig) -> int:
+    """Length of the observation vector of an environment config."""
+    return obs_size(cfg.obs_window, cfg.obs_global, cfg.obs_visits, cfg.obs_target)
+
+
+def obs_extras(cfg: VCPPConfig) -> int:
+    """The ``extras`` bits of an environment config, for the observation kernels."""
+    return (EXTRA_VISITS if cfg.obs_visits else 0) | (EXTRA_TARGET if cfg.obs_target else 0)
 
 
 @numba.njit(cache=True, inline="always")
 def _observation(
     e, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
-    window, out,
+    window, out, visits, extras,
 ):  # fmt: skip
     sx, sy, sz = blocked.shape[1], blocked.shape[2], blocked.shape[3]
     g = blk_todo.shape[1]
@@ -70,19 +94,42 @@ def _observation(
     o[k + 8] = max(0.0, (step_limit - ints[e, D.STEPS]) / step_limit)
     o[k + 9] = 1.0 if (z + 1 >= sz or blocked[e, x, y, z + 1]) else 0.0
     o[k + 10] = 1.0 if (z - 1 < 0 or blocked[e, x, y, z - 1]) else 0.0
+    k += N_SCALARS
+    if extras & EXTRA_VISITS:
+        for i in range(x - half, x + half + 1):
+            for j in range(y - half, y + half + 1):
+                v = visits[e, i, j, z] if (0 <= i < sx and 0 <= j < sy) else 0
+                o[k] = min(v, 3) / 3.0
+                k += 1
+    if extras & EXTRA_TARGET:
+        best = -1
+        bi, bj = 0, 0
+        for i in range(sx):
+            for j in range(sy):
+                if coverable[e, i, j] and views[e, i, j] == 0:
+                    d2 = (i - x) * (i - x) + (j - y) * (j - y)
+                    if best < 0 or d2 < best:
+                        best, bi, bj = d2, i, j
+        if best <= 0:  # none left, or the UAV is above one
+            o[k], o[k + 1], o[k + 2] = 0.5, 0.5, 0.0
+        else:
+            d = np.sqrt(best)
+            o[k] = ((bi - x) / d + 1.0) / 2.0
+            o[k + 1] = ((bj - y) / d + 1.0) / 2.0
+            o[k + 2] = min(d, TARGET_RANGE) / TARGET_RANGE
 
 
 @numba.njit(cache=True)
 def build_observations(
     worlds, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
-    window, out,
+    window, out, visits, extras,
 ):  # fmt: skip
     """Write the observation of each world index in ``worlds`` into the matching row of out."""
     for k in range(worlds.shape[0]):
         _observation(
             worlds[k], ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo,
-            blk_total, window, out,
+            blk_total, window, out, visits, extras,
         )  # fmt: skip
 
 
-__all__ = ["N_SCALARS", "build_observations", "obs_size"]
+__all__ = ["N_SCALARS", "build_observations", "obs_extras", "obs_size", "obs_size_for"]

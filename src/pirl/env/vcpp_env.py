@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from pirl.env.core import EnvCore
-from pirl.env.observation import obs_size
+from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.world import dynamics as D
 from pirl.world.config import ConfigError, VCPPConfig
@@ -107,7 +107,7 @@ class VCPPEnv(gym.Env):
         self.render_mode = render_mode
         self.core = EnvCore(self.cfg, 1)
         self.action_space = spaces.Discrete(D.N_ACTIONS)
-        n = obs_size(self.cfg.obs_window, self.cfg.obs_global)
+        n = obs_size_for(self.cfg)
         self.observation_space = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         self.path: list[tuple[int, int, int]] = []
 

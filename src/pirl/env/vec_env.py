@@ -11,7 +11,7 @@ from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from pirl.env.core import EnvCore
-from pirl.env.observation import obs_size
+from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
@@ -37,7 +37,7 @@ class VCPPVecEnv(VecEnv):
     ) -> None:
         self.cfg = resolve_config(config, settings)
         self.core = EnvCore(self.cfg, num_envs, parallel)
-        n = obs_size(self.cfg.obs_window, self.cfg.obs_global)
+        n = obs_size_for(self.cfg)
         self.render_mode = "rgb_array"
         super().__init__(
             num_envs,

@@ -18,7 +18,7 @@ from gymnasium.vector.utils import batch_space
 
 from pirl.env.core import EnvCore
 from pirl.env.info import LazyVectorInfo
-from pirl.env.observation import obs_size
+from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
@@ -69,7 +69,7 @@ class VCPPVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.core = EnvCore(self.cfg, num_envs, parallel)
         self.copy = copy
-        n = obs_size(self.cfg.obs_window, self.cfg.obs_global)
+        n = obs_size_for(self.cfg)
         self.single_observation_space = spaces.Box(0.0, 1.0, (n,), dtype=np.float32)
         self.single_action_space = spaces.Discrete(D.N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, num_envs)

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from pirl import _quiet
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import ACT_MODES, BUILTIN, LABELS, check_act, model_file, run_meta
 from pirl.evaluate.scenarios import scenario_seeds, size_name
@@ -334,12 +335,13 @@ def distinct_specs(specs: list[MethodSpec]) -> list[MethodSpec]:
         first = by_label.setdefault(spec.label, spec)
         if first is spec:
             continue
-        if first.train_seed == spec.train_seed:
+        # The differing setting first: two runs that differ are not copies of one run.
+        diff = _config_difference(Path(first.source), Path(spec.source), spec.key)
+        if diff is None and first.train_seed == spec.train_seed:
             raise ConfigError(
                 f"{first.source} and {spec.source} are both {spec.label!r} with seed "
                 f"{spec.train_seed}: copies of one run count once; give one of them"
             )
-        diff = _config_difference(Path(first.source), Path(spec.source), spec.key)
         if diff is not None:
             key, a, b = diff
             raise ConfigError(
@@ -388,7 +390,10 @@ def _config_difference(a: Path, b: Path, method: str) -> tuple[str, Any, Any] | 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
     # spawn: workers must not inherit the parent's threads (torch, an LLM, numba).
-    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+    # ignore_sigint: Ctrl-C is the parent's to handle (one line, no worker tracebacks).
+    return ProcessPoolExecutor(
+        max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_quiet.ignore_sigint
+    )
 
 
 def _check_observations(plan: EvalPlan) -> None:
@@ -402,8 +407,8 @@ def _check_observations(plan: EvalPlan) -> None:
         if not cfg_path.is_file():
             continue
         trained = (yaml.safe_load(cfg_path.read_text()) or {}).get("env", {})
-        for key in ("obs_window", "obs_global"):
-            if key in trained and trained[key] != getattr(plan.env, key):
+        for key in ("obs_window", "obs_global", "obs_visits", "obs_target"):
+            if trained.get(key, False) != getattr(plan.env, key):
                 raise ConfigError(
                     f"{spec.source} was trained with {key}={trained[key]}, "
                     f"the evaluation uses {getattr(plan.env, key)}"

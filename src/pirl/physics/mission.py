@@ -45,7 +45,7 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from pirl.env.info import InfoSnapshot
-from pirl.env.observation import build_observations, obs_size
+from pirl.env.observation import build_observations, obs_extras, obs_size_for
 from pirl.physics.config import PhysicsConfig
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
@@ -122,7 +122,7 @@ class Mission:
                 f"alpha={env_cfg.alpha:.3g} rounds to 0; raise max_steps or set scale_by_alpha"
             )
         self.model = PAPER if env_cfg.footprint == "paper" else FRUSTUM
-        self.obs = np.zeros((1, obs_size(env_cfg.obs_window, env_cfg.obs_global)), np.float32)
+        self.obs = np.zeros((1, obs_size_for(env_cfg)), np.float32)
         self._buf = np.empty((buffer_rows(self.model, env_cfg.max_range), 2), dtype=np.int64)
         self._weights = np.zeros((1, len(REWARD_TERMS)))
         self._seen = np.zeros(env_cfg.size[:2], dtype=np.bool_)
@@ -392,14 +392,20 @@ class Mission:
         w = self.world
         build_observations(
             self._index, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
-            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs,
+            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs, w.visits,
+            obs_extras(self.cfg),
         )  # fmt: skip
         return self.obs[0].copy()
 
     def _info(self) -> dict[str, Any]:
         w = self.world
         metrics = {0: self.metrics()} if self.done else {}
-        snap = InfoSnapshot(w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics)
+        # The grid's valid-action rule, so a policy trained with masks flies with them too.
+        masks = np.ones((1, D.N_ACTIONS), dtype=np.bool_)
+        D.action_masks(self._index, w.ints, w.blocked, w.pi, masks)
+        snap = InfoSnapshot(
+            w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics, masks
+        )
         return snap.info(0)
 
 

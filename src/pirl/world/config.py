@@ -127,6 +127,15 @@ class VCPPConfig:
     """Side of the egocentric local window in the observation (odd)."""
     obs_global: int = 8
     """Side of the coarse global coverage summary in the observation."""
+    obs_visits: bool = False
+    """Add a local window of this episode's visit counts at the UAV's altitude (min(v, 3)/3):
+    the curiosity term rewards unvisited cells, and without it a policy cannot see which ones
+    it has visited, so a greedy policy can loop (uavSim keeps a position history for this).
+    False is the paper's observation."""
+    obs_target: bool = False
+    """Add the direction to the nearest coverable cell not yet covered and its distance in
+    cells (saturating at 16), so a policy trained on a small world can find the work left on a
+    large one where its local window shows none. False is the paper's observation."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
 
