@@ -80,14 +80,14 @@ def test_hits_misses_and_one_inner_batch(tmp_path: Path) -> None:
     assert cached.advise([]) == []
 
 
-def test_failures_are_not_cached_but_unparseable_answers_are(tmp_path: Path) -> None:
+def test_failed_and_unparseable_answers_are_never_cached(tmp_path: Path) -> None:
     inner = HashAdvisor()
     cached = CachedAdvisor(inner, tmp_path / "c.sqlite")
     a = cached.advise(["fail 1", "junk 1", "ok"])
     assert a[0].error == "server on fire" and a[1].recommendation is None and a[2].ok
     b = cached.advise(["fail 1", "junk 1", "ok"])
-    assert inner.batches[-1] == ["fail 1"]  # asked again
-    assert [x.from_cache for x in b] == [False, True, True]
+    assert inner.batches[-1] == ["fail 1", "junk 1"]  # both asked again (issue 15)
+    assert [x.from_cache for x in b] == [False, False, True]
     assert b[1].text == "no idea" and b[1].recommendation is None
 
 

@@ -1,18 +1,24 @@
 """A persistent SQLite cache in front of any advisor.
 
-The key is the SHA-256 of (advisor name, model, settings key, prompt). The database runs in WAL
-mode with a busy timeout, so several processes (vectorized environments, parallel evaluation
-runs) can read and write it at once. Only successful calls are stored (an answer that does not
-parse is stored: the model did answer); failed calls are asked again next time.
+The key is the SHA-256 of (advisor name, model, settings key, prompt); an advisor's settings key
+holds everything else that changes its answers (for an OpenAI-compatible server, the server's
+URL). The database runs in WAL mode with a busy timeout, so several processes (vectorized
+environments, parallel evaluation runs) can read and write it at once. Only answers that parse
+are stored and served: a failed call or an unparseable answer is asked again next time, so a
+server that answered badly and was then fixed is heard (and a run stopped by it resumes).
+
+A cache file that is damaged is moved aside (``*.corrupt``) and started afresh; one that cannot
+be opened (read-only folder, locked beyond the timeout) is left alone and the advisor runs
+without a cache. Either way one warning line names the file and what was done.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import os
 import sqlite3
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -23,9 +29,7 @@ from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.parser import parse_recommendation
 from pirl.advice.recommendation import Recommendation
 
-__all__ = ["CachedAdvisor", "cache_key"]
-
-log = logging.getLogger(__name__)
+__all__ = ["CachedAdvisor", "cache_key", "connect_wal", "open_store"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS answers (
@@ -67,6 +71,66 @@ def connect_wal(path: Path, timeout_s: float, schema: list[str]) -> sqlite3.Conn
             time.sleep(0.05)
 
 
+def warn(message: str) -> None:
+    """One warning line on stderr (shown in every process, logging configured or not)."""
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
+def _damaged(exc: BaseException) -> bool:
+    """Whether SQLite says the file itself is not a (sound) database."""
+    text = str(exc).lower()
+    return isinstance(exc, sqlite3.DatabaseError) and (
+        "not a database" in text or "malformed" in text or "encrypted" in text
+    )
+
+
+def _move_aside(path: Path) -> Path:
+    """Rename ``path`` (and its WAL companions) to ``*.corrupt``; returns the new name."""
+    aside = path.with_name(path.name + ".corrupt")
+    n = 1
+    while aside.exists():  # keep every earlier damaged copy for a post-mortem
+        aside = path.with_name(f"{path.name}.{n}.corrupt")
+        n += 1
+    os.replace(path, aside)
+    for suffix in ("-wal", "-shm"):
+        companion = path.with_name(path.name + suffix)
+        if companion.exists():
+            os.replace(companion, aside.with_name(aside.name + suffix))
+    return aside
+
+
+def open_store(
+    path: Path, timeout_s: float, schema: list[str], what: str
+) -> sqlite3.Connection | None:
+    """:func:`connect_wal`, degrading instead of failing: a damaged file is moved aside and
+    started afresh; a file that cannot be opened gives None (run without it). Each case says
+    so in one warning line naming ``what`` and the file."""
+    try:
+        return connect_wal(path, timeout_s, schema)
+    except (sqlite3.Error, OSError) as exc:
+        reason: BaseException = exc
+        if _damaged(exc):
+            try:
+                aside = _move_aside(path)
+            except OSError as move_exc:
+                reason = move_exc
+            else:
+                try:
+                    conn = connect_wal(path, timeout_s, schema)
+                except (sqlite3.Error, OSError) as again:
+                    reason = again
+                else:
+                    warn(f"{what} {path} was damaged ({exc}); moved it to {aside}, started afresh")
+                    return conn
+    warn(f"{what} {path} cannot be used ({_first_line(reason)}); going on without it")
+    return None
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
 def cache_key(advisor: str, model: str, settings: str, prompt: str) -> str:
     """The cache key of one prompt: SHA-256 hex of the four parts."""
     payload = json.dumps([advisor, model, settings, prompt], ensure_ascii=False)
@@ -99,8 +163,10 @@ class CachedAdvisor(Advisor):
         self._lock = threading.Lock()
         self._conn: sqlite3.Connection | None = None
         self._pid = -1
+        self.disabled = False
+        """True once the file proved unusable: answers are then asked, never stored."""
         with self._lock:
-            self._connection()  # fail early on a bad path
+            self._connection()  # damaged or unusable files are dealt with now, in one line
 
     def settings_key(self) -> str:
         """The inner advisor's settings key."""
@@ -110,10 +176,16 @@ class CachedAdvisor(Advisor):
         """The cache key of ``prompt`` for the inner advisor."""
         return cache_key(self.inner.name, self.inner.model, self.inner.settings_key(), prompt)
 
-    def _connection(self) -> sqlite3.Connection:
+    def _connection(self) -> sqlite3.Connection | None:
+        if self.disabled:
+            return None
         if self._conn is not None and self._pid == os.getpid():
             return self._conn
-        self._conn, self._pid = connect_wal(self.path, self.timeout_s, [_SCHEMA]), os.getpid()
+        conn = open_store(self.path, self.timeout_s, [_SCHEMA], "advice cache")
+        if conn is None:
+            self.disabled = True  # said once; a copy in another process inherits the verdict
+            return None
+        self._conn, self._pid = conn, os.getpid()
         return self._conn
 
     def _lookup(self, keys: list[str]) -> dict[str, Answer]:
@@ -121,6 +193,8 @@ class CachedAdvisor(Advisor):
         unique = list(dict.fromkeys(keys))
         with self._lock:
             conn = self._connection()
+            if conn is None:
+                return found
             for start in range(0, len(unique), _CHUNK):
                 chunk = unique[start : start + _CHUNK]
                 marks = ",".join("?" * len(chunk))
@@ -128,14 +202,17 @@ class CachedAdvisor(Advisor):
                     f"SELECT key, text, recommendation FROM answers WHERE key IN ({marks})", chunk
                 ).fetchall()
                 for key, text, rec in rows:
-                    found[key] = Answer(
-                        text=text, recommendation=_load_rec(rec, text), from_cache=True
-                    )
+                    parsed = _load_rec(rec, text)
+                    if parsed is None:  # stored by an older version: ask again, never replay
+                        continue
+                    found[key] = Answer(text=text, recommendation=parsed, from_cache=True)
         return found
 
     def _store(self, rows: list[tuple[Any, ...]]) -> None:
         with self._lock:
             conn = self._connection()
+            if conn is None:
+                return
             conn.execute("BEGIN IMMEDIATE")
             try:
                 conn.executemany(
@@ -161,7 +238,7 @@ class CachedAdvisor(Advisor):
         try:
             found = self._lookup(keys)
         except Exception as exc:  # noqa: BLE001 - a broken cache degrades to no cache
-            log.warning("advice cache %s unreadable (%s); asking the advisor", self.path, exc)
+            self._give_up(exc)
             found = {}
         lookup_s = time.perf_counter() - started
         missing: dict[str, str] = {}
@@ -191,13 +268,13 @@ class CachedAdvisor(Advisor):
                     now,
                 )
                 for key, a in fresh.items()
-                if a.error is None
+                if a.error is None and a.recommendation is not None
             ]
             if rows:
                 try:
                     self._store(rows)
-                except Exception as exc:  # noqa: BLE001
-                    log.warning("advice cache %s not written (%s)", self.path, exc)
+                except Exception as exc:  # noqa: BLE001 - a broken cache degrades to no cache
+                    self._give_up(exc)
         result = []
         n_hits = 0
         for key in keys:
@@ -218,6 +295,18 @@ class CachedAdvisor(Advisor):
             self.hits += n_hits
             self.misses += len(prompts) - n_hits
         return result
+
+    def _give_up(self, exc: BaseException) -> None:
+        """The file failed after it opened (damaged later, disk full): say it once, go on
+        without the cache."""
+        with self._lock:
+            if self.disabled:
+                return
+            self.disabled = True
+            if self._conn is not None and self._pid == os.getpid():
+                self._conn.close()
+            self._conn = None
+        warn(f"advice cache {self.path} failed ({_first_line(exc)}); going on without it")
 
     @property
     def exhausted(self) -> bool:
@@ -245,7 +334,10 @@ class CachedAdvisor(Advisor):
 
     def __len__(self) -> int:
         with self._lock:
-            return int(self._connection().execute("SELECT COUNT(*) FROM answers").fetchone()[0])
+            conn = self._connection()
+            if conn is None:
+                return 0
+            return int(conn.execute("SELECT COUNT(*) FROM answers").fetchone()[0])
 
     def close(self) -> None:
         """Close the database and the inner advisor."""

@@ -75,6 +75,7 @@ def _backend(name: str, cfg: Any) -> Advisor:
         base_url=a.openai_base_url or None,
         api_key_env=a.openai_api_key_env,
         timeout_s=a.openai_timeout_s,
+        deadline_s=a.openai_deadline_s,
         max_retries=a.openai_max_retries,
         concurrency=a.openai_concurrency,
     )

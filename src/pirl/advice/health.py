@@ -7,6 +7,8 @@ scenario of the training world.
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from typing import Any
 
 from pirl.advice.base import Advisor, Answer
@@ -21,6 +23,15 @@ def backend_of(advisor: Any) -> Any:
     return advisor
 
 
+def location(advisor: Any) -> str:
+    """The server URL an advisor asks, or its model (folder) when it runs here."""
+    backend = backend_of(advisor)
+    if backend.name == "openai":
+        return str(getattr(backend, "base_url", None) or "https://api.openai.com/v1")
+    model_dir = getattr(backend, "model_dir", None)
+    return str(model_dir) if model_dir else f"model {backend.model}"
+
+
 def where(advisor: Any) -> str:
     """The server URL or model an advisor talks to, for error messages."""
     backend = backend_of(advisor)
@@ -32,11 +43,44 @@ def where(advisor: Any) -> str:
     return f"model {backend.model}"
 
 
-def probe(advisor: Advisor, env_cfg: Any, prompt_variant: str = "paper") -> Answer:
-    """Ask the backend about one state; raise :class:`UserError` (one line) if the call fails.
+def advise_within(
+    advisor: Advisor, prompts: list[str], views: Any, timeout_s: float
+) -> list[Answer] | None:
+    """``advisor.advise(prompts, views)``, or None when it has not answered in ``timeout_s``.
+
+    The call runs in a daemon thread: a server that accepts the connection and never answers
+    cannot hold the caller (nor, at exit, the interpreter) past the deadline.
+    """
+    box: dict[str, Any] = {}
+
+    def call() -> None:
+        try:
+            box["answers"] = advisor.advise(prompts, views)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=call, name="pirl-probe", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if thread.is_alive():
+        return None
+    if "error" in box:
+        raise box["error"]
+    return box["answers"]
+
+
+def probe(
+    advisor: Advisor,
+    env_cfg: Any,
+    prompt_variant: str = "paper",
+    timeout_s: float = 30.0,
+    log: Callable[[str], Any] | None = None,
+) -> Answer:
+    """Ask the backend about one state; raise :class:`UserError` (one line) if the call fails
+    or gives no answer within ``timeout_s`` (``log`` gets a "probing ..." line first).
 
     An answer that does not parse is returned (the run counts such answers); only a failed call
-    (unreachable server, refused key, missing model) stops here.
+    (unreachable server, refused key, missing model, a server that never answers) stops here.
     """
     from pirl.env.vcpp_env import VCPPEnv
 
@@ -44,13 +88,22 @@ def probe(advisor: Advisor, env_cfg: Any, prompt_variant: str = "paper") -> Answ
     env = VCPPEnv(env_cfg.replace(llm_weight=False))
     env.reset(seed=0)
     prompts, views = advice_requests(env.world, [0], backend, prompt_variant)
+    if log is not None and backend.name == "openai":  # a server: the one that may hang
+        log(f"probing {advisor.label} at {location(advisor)} (up to {timeout_s:g} s)...")
     try:
-        answer = backend.advise(prompts, views)[0]
+        answers = advise_within(backend, prompts, views, timeout_s)
     except Exception as exc:  # noqa: BLE001 - an advisor must not raise; say what it did
         raise UserError(
             f"advisor {advisor.label} ({where(advisor)}) failed its probe call: "
             f"{type(exc).__name__}: {exc}"
         ) from None
+    if answers is None:
+        raise UserError(
+            f"advisor {advisor.label} ({where(advisor)}) gave no answer to its probe call "
+            f"within {timeout_s:g} s (advisor.probe_timeout_s); check that the server is "
+            "serving, or raise the timeout for a slow one"
+        )
+    answer = answers[0]
     if answer.error is not None:
         first = answer.error.strip().splitlines()[0] if answer.error.strip() else "no answer"
         raise UserError(
@@ -60,4 +113,4 @@ def probe(advisor: Advisor, env_cfg: Any, prompt_variant: str = "paper") -> Answ
     return answer
 
 
-__all__ = ["backend_of", "probe", "where"]
+__all__ = ["advise_within", "backend_of", "location", "probe", "where"]

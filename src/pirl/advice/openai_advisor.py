@@ -24,6 +24,8 @@ __all__ = ["OpenAIAdvisor"]
 
 log = logging.getLogger(__name__)
 
+OPENAI_URL = "https://api.openai.com/v1"
+"""The server asked when neither ``base_url`` nor ``$OPENAI_BASE_URL`` names one."""
 NO_KEY = "not-needed"
 """Key sent to a ``base_url`` server when the environment holds none (local servers ignore it)."""
 
@@ -33,11 +35,14 @@ class OpenAIAdvisor(Advisor):
 
     Args:
         model: model name; for ``transformers serve`` the exact model folder path it serves.
-        base_url: an OpenAI-compatible server (e.g. ``http://127.0.0.1:8000/v1``); ``None`` for
-            OpenAI itself.
+        base_url: an OpenAI-compatible server (e.g. ``http://127.0.0.1:8000/v1``); ``None``:
+            ``$OPENAI_BASE_URL`` when set (as the openai SDK does), else OpenAI itself.
         api_key_env: environment variable that holds the key. Required for OpenAI; with a
             ``base_url`` a missing key is replaced by ``"not-needed"``.
         timeout_s: per-request timeout, seconds.
+        deadline_s: longest time one ``advise`` call may take, whatever the batch size,
+            retries and timeouts: prompts still unanswered then fail (so a server that accepts
+            connections but never answers is counted as failing instead of holding training).
         max_retries: retries after the first attempt, on rate limits (429), timeouts, dropped
             connections and server errors (5xx). Other errors are not retried.
         backoff_s: first retry delay; doubled at each retry, capped by ``max_backoff_s``, with
@@ -59,6 +64,7 @@ class OpenAIAdvisor(Advisor):
         base_url: str | None = None,
         api_key_env: str = "OPENAI_API_KEY",
         timeout_s: float = 30.0,
+        deadline_s: float = 60.0,
         max_retries: int = 3,
         backoff_s: float = 0.5,
         max_backoff_s: float = 8.0,
@@ -72,12 +78,15 @@ class OpenAIAdvisor(Advisor):
             raise ValueError(f"concurrency must be >= 1, got {concurrency}")
         if max_retries < 0:
             raise ValueError(f"max_retries must be >= 0, got {max_retries}")
-        if timeout_s <= 0:
-            raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        if timeout_s <= 0 or deadline_s <= 0:
+            raise ValueError(f"timeout_s and deadline_s must be > 0, got {timeout_s}, {deadline_s}")
         self.model = model
-        self.base_url = base_url
+        # The SDK reads OPENAI_BASE_URL when no base_url is given; so do the label, the cache
+        # key and the key check, so that they name the server really asked.
+        self.base_url = base_url or os.environ.get("OPENAI_BASE_URL") or None
         self.api_key_env = api_key_env
         self.timeout_s = float(timeout_s)
+        self.deadline_s = float(deadline_s)
         self.max_retries = int(max_retries)
         self.backoff_s = float(backoff_s)
         self.max_backoff_s = float(max_backoff_s)
@@ -86,7 +95,7 @@ class OpenAIAdvisor(Advisor):
         self.max_tokens = int(max_tokens)
         self.system_prompt = system_prompt
         self.seed = seed
-        host = urlparse(base_url).netloc if base_url else ""
+        host = urlparse(self.base_url).netloc if self.base_url else ""
         self.label = f"openai:{model}" + (f"@{host}" if host else "")
         self._client: Any = None
         self._client = self._make_client()  # fail early when the key is missing
@@ -115,8 +124,10 @@ class OpenAIAdvisor(Advisor):
         return self._client
 
     def settings_key(self) -> str:
-        """Generation settings that change answers (not timeouts or concurrency)."""
+        """What changes answers besides the model: the server and the generation settings
+        (not timeouts or concurrency)."""
         settings = {
+            "server": (self.base_url or OPENAI_URL).rstrip("/"),
             "temperature": self.temperature,
             "max_tokens": self.max_tokens,
             "system_prompt": self.system_prompt,
@@ -132,10 +143,11 @@ class OpenAIAdvisor(Advisor):
             client = self.client
         except Exception as exc:  # noqa: BLE001
             return [error_answer(f"{type(exc).__name__}: {exc}") for _ in prompts]
+        deadline = time.monotonic() + self.deadline_s
         if len(prompts) == 1 or self.concurrency == 1:
-            return [self._ask(client, p) for p in prompts]
+            return [self._ask(client, p, deadline) for p in prompts]
         with ThreadPoolExecutor(max_workers=min(self.concurrency, len(prompts))) as pool:
-            return list(pool.map(lambda p: self._ask(client, p), prompts))
+            return list(pool.map(lambda p: self._ask(client, p, deadline), prompts))
 
     def _messages(self, prompt: str) -> list[dict[str, str]]:
         messages = [{"role": "user", "content": prompt}]
@@ -143,8 +155,9 @@ class OpenAIAdvisor(Advisor):
             messages.insert(0, {"role": "system", "content": self.system_prompt})
         return messages
 
-    def _ask(self, client: Any, prompt: str) -> Answer:
-        """One prompt, with retries; every failure becomes an error answer."""
+    def _ask(self, client: Any, prompt: str, deadline: float | None = None) -> Answer:
+        """One prompt, with retries, done by ``deadline`` (``time.monotonic``); every failure
+        becomes an error answer."""
         import openai
 
         started = time.perf_counter()
@@ -157,9 +170,21 @@ class OpenAIAdvisor(Advisor):
         if self.seed is not None:
             request["seed"] = self.seed
         attempt = 0
+        if deadline is None:
+            deadline = time.monotonic() + self.deadline_s
         while True:
+            left = deadline - time.monotonic()
+            if left <= 0.05:
+                return error_answer(
+                    f"no answer within the {self.deadline_s:g} s deadline "
+                    f"(advisor.openai_deadline_s) after {attempt} attempt(s)",
+                    time.perf_counter() - started,
+                )
             try:
-                response = client.chat.completions.create(**request)
+                # Each attempt gets what is left of the deadline at most.
+                response = client.chat.completions.create(
+                    **request, timeout=min(self.timeout_s, left)
+                )
                 break
             except Exception as exc:  # noqa: BLE001 - classified below, never raised
                 retryable = isinstance(
@@ -169,7 +194,7 @@ class OpenAIAdvisor(Advisor):
                 if not retryable or attempt >= self.max_retries:
                     elapsed = time.perf_counter() - started
                     return error_answer(_describe(exc, attempt + 1, client.api_key), elapsed)
-                delay = self._delay(attempt, exc)
+                delay = min(self._delay(attempt, exc), max(0.0, deadline - time.monotonic()))
                 log.debug("retrying after %s in %.2f s", type(exc).__name__, delay)
                 time.sleep(delay)
                 attempt += 1
