@@ -61,3 +61,11 @@ def import_quietly(name: str) -> ModuleType:
         return sys.modules[name]
     with stderr_to_devnull():
         return importlib.import_module(name)
+
+
+def ignore_sigint() -> None:
+    """In a worker process: leave Ctrl-C to the parent, which stops its workers and says in
+    one line what was kept (instead of one ``KeyboardInterrupt`` traceback per worker)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -39,7 +39,7 @@ RayOpt = Annotated[
 
 
 def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn configuration and input errors into one readable line and exit code 2."""
+    """Turn configuration, input and OS errors into one readable line and exit code 2."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -49,8 +49,74 @@ def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
             # One line whatever the width: a log or a test reads it whole.
             err.print(f"[bold red]error:[/] {escape(str(exc))}", soft_wrap=True)
             raise typer.Exit(2) from None
+        except OSError as exc:
+            # A read-only or full disk, a folder without permission: the path and the cause.
+            err.print(f"[bold red]error:[/] {escape(os_error_line(exc))}", soft_wrap=True)
+            raise typer.Exit(2) from None
 
     return wrapper
+
+
+def os_error_line(exc: OSError) -> str:
+    """``cannot write PATH: No space left on device (...)``: one line for an OS error."""
+    import errno
+
+    path = exc.filename if exc.filename is not None else "(unknown path)"
+    reason = exc.strerror or type(exc).__name__
+    hint = {
+        errno.ENOSPC: "free some space, then run the same command again",
+        errno.EROFS: "the file system is read-only; choose another --out",
+        errno.EACCES: "no permission; choose another --out or fix the folder's permissions",
+        errno.EPERM: "no permission; choose another --out or fix the folder's permissions",
+        errno.EDQUOT: "disk quota exceeded; free some space, then run the same command again",
+    }.get(exc.errno or 0, "")
+    return f"{path}: {reason}" + (f" ({hint})" if hint else "")
+
+
+def _interrupted(message: str) -> typer.Exit:
+    """Ctrl-C in a command with worker processes: one line, exit 130."""
+    err.print(f"interrupted: {message}", soft_wrap=True, highlight=False, markup=False)
+    return typer.Exit(130)
+
+
+class _StopWorkersOnCtrlC:
+    """While active, Ctrl-C first stops this process's worker processes (they ignore it, so
+    none prints a traceback; a pool then finds them gone instead of waiting for their
+    work), then raises ``KeyboardInterrupt`` here as usual."""
+
+    def __enter__(self) -> _StopWorkersOnCtrlC:
+        import signal
+
+        self._old = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        import multiprocessing as mp
+
+        for child in mp.active_children():
+            child.terminate()
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        signal.signal(signal.SIGINT, self._old)
+
+
+def _check_workers(workers: int | None) -> None:
+    if workers is not None and workers < 1:
+        raise ConfigError(f"--workers {workers}: must be >= 1")
+
+
+def _check_layouts(env: VCPPConfig, sizes: list[tuple[int, int, int]]) -> None:
+    """Draw one scenario per size now: an impossible obstacle layout is refused before any
+    folder is made (not by a worker, after)."""
+    import numpy as np
+
+    from pirl.world.state import draw_scenario
+
+    for size in sizes:
+        draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
 
 
 def _env_config(config: Path | None, **overrides: Any) -> VCPPConfig:
@@ -139,21 +205,46 @@ def reproduce(
         cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
     advisor = advisor or cfg.pare.advisor
     _check_openai_key(cfg, advisor)
+    _check_workers(workers)
+    from pirl.agents.run_folder import folder_lock
+    from pirl.agents.train import TrainingInterrupted
+    from pirl.evaluate.scenarios import parse_size
+
+    rp = cfg.reproduce
+    _check_layouts(cfg.env, [cfg.env.size, *map(parse_size, rp.sizes + rp.physics_sizes)])
     out = out or Path("results") / profile
     console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
-    with Progress(console=console, transient=True) as bar:
-        progress = _EpisodeProgress(bar, "evaluation")
-        report = run_reproduce(
-            cfg,
-            out,
-            advisor,
-            workers,
-            log=lambda m: console.print(m),
-            progress=progress,
-            ray_address=ray_address,
-        )
+    try:
+        with (
+            folder_lock(out),
+            _StopWorkersOnCtrlC(),
+            Progress(console=console, transient=True) as bar,
+        ):
+            progress = _EpisodeProgress(bar, "evaluation")
+            report = run_reproduce(
+                cfg,
+                out,
+                advisor,
+                workers,
+                log=lambda m: console.print(m),
+                progress=progress,
+                ray_address=ray_address,
+            )
+    except (KeyboardInterrupt, TrainingInterrupted):
+        raise _interrupted(
+            f"finished runs and the last checkpoint of each run in progress are kept in {out}; "
+            f"run the same command to resume: {_command_line()}"
+        ) from None
     console.print(f"[bold]report:[/] {report}")
     console.print(f"tables: {report.parent / 'table.md'}")
+
+
+def _command_line() -> str:
+    """The command as typed (quoted for a shell), for a "run it again" hint."""
+    import shlex
+    import sys
+
+    return "pirl " + shlex.join(sys.argv[1:])
 
 
 BUNDLED_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -178,10 +269,13 @@ def _check_openai_key(cfg: Any, advisor: str) -> None:
     import os
 
     a = cfg.advisor
-    if advisor == "openai" and not a.openai_base_url and not os.environ.get(a.openai_api_key_env):
+    # OPENAI_BASE_URL names a server as the openai SDK reads it; such a server may need no key.
+    server = a.openai_base_url or os.environ.get("OPENAI_BASE_URL")
+    if advisor == "openai" and not server and not os.environ.get(a.openai_api_key_env):
         raise UserError(
             f"the openai advisor needs an API key: set the {a.openai_api_key_env} environment "
-            "variable (or advisor.openai_base_url for a server that needs none)"
+            "variable (or advisor.openai_base_url or OPENAI_BASE_URL for a server that needs "
+            "none)"
         )
 
 
@@ -241,6 +335,7 @@ def train(
         cfg = cfg.with_overrides(pare={"advisor": advisor})
     if method == "pirl":
         _check_openai_key(cfg, cfg.pare.advisor)
+    _check_layouts(cfg.env, [cfg.env.size])  # before the run folder is made
     try:
         if method == "il":
             from pirl.agents.imitation import train_il
@@ -291,6 +386,7 @@ def distill(
     cfg = RunConfig.from_yaml(_preset(config, "--config"))
     if teacher == "openai":
         _check_openai_key(cfg, teacher)
+    sources = _split_sources(policy or ["boustrophedon", "random"], ("boustrophedon", "random"))
     with Progress(console=console, transient=True) as bar:
         task = bar.add_task("teacher answers", total=states)
 
@@ -300,8 +396,7 @@ def distill(
                 console.print(f"distill: {done}/{total} answers")
 
         record = run_distill(
-            cfg, teacher, states, out, _split_words(policy or ["boustrophedon", "random"]),
-            seed=seed, fit_steps=fit_steps, progress=progress,
+            cfg, teacher, states, out, sources, seed=seed, fit_steps=fit_steps, progress=progress,
         )  # fmt: skip
     console.print(
         f"{record['label']}: agreement {record['agreement']:.3f} (majority "
@@ -325,7 +420,11 @@ def _run_seed(out: Path) -> int:
 @_clean_errors
 def evaluate(
     runs: Annotated[
-        list[Path] | None, typer.Option(help="Finished run folders (repeat or space-separate).")
+        list[Path] | None,
+        typer.Option(
+            help="Finished run folders: --runs A B, or repeat --runs (a path may hold spaces, "
+            "commas or any character)."
+        ),
     ] = None,
     methods: Annotated[
         list[str] | None, typer.Option(help="Built-in methods: boustrophedon, llm-only, random.")
@@ -349,11 +448,15 @@ def evaluate(
         ),
     ] = "both",
     ray_address: RayOpt = None,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace the results already in --out (refused otherwise).")
+    ] = False,
 ) -> None:
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
 
     from pirl.agents.config import RunConfig
+    from pirl.agents.run_folder import folder_contents, folder_lock
     from pirl.evaluate.runner import EvalPlan, parse_acts, spec_for_builtin, spec_for_run
     from pirl.evaluate.runner import evaluate as run_evaluation
     from pirl.evaluate.scenarios import parse_size
@@ -361,6 +464,12 @@ def evaluate(
     acts = parse_acts(act)
     if episodes < 1:
         raise ConfigError(f"--episodes {episodes}: must be >= 1")
+    _check_workers(workers)
+    if folder_contents(out) and not overwrite:
+        raise ConfigError(
+            f"--out {out} already holds results; pass --overwrite to replace them or choose "
+            "another --out"
+        )
     run_list = _split_paths(runs or [])
     if config is not None:
         cfg = RunConfig.from_yaml(_preset(config, "--config"))
@@ -378,9 +487,11 @@ def evaluate(
     if "llm-only" in builtins:
         _check_openai_key(cfg, advisor)
     specs += [spec_for_builtin(m, advisor) for m in builtins]
+    size_list = [parse_size(s) for s in _split_words(sizes or ["30", "45", "60"])]
+    _check_layouts(cfg.env, size_list)
     plan = EvalPlan(
         specs=specs,
-        sizes=[parse_size(s) for s in _split_words(sizes or ["30", "45", "60"])],
+        sizes=size_list,
         episodes=episodes,
         sims=_split_words(sim or ["grid"]),
         env=cfg.env,
@@ -392,10 +503,21 @@ def evaluate(
         from pirl.evaluate.distributed import ray_executor
 
         factory = functools.partial(ray_executor, ray_address)
-    with Progress(console=console, transient=True) as bar:
-        summary = run_evaluation(
-            plan, out, workers, progress=_EpisodeProgress(bar, "episodes"), executor_factory=factory
-        )
+    try:
+        with (
+            folder_lock(out),
+            _StopWorkersOnCtrlC(),
+            Progress(console=console, transient=True) as bar,
+        ):
+            summary = run_evaluation(
+                plan, out, workers, progress=_EpisodeProgress(bar, "episodes"),
+                executor_factory=factory,
+            )  # fmt: skip
+    except KeyboardInterrupt:
+        raise _interrupted(
+            f"no results written to {out} (they are written once every episode is done); "
+            f"run the same command to start again: {_command_line()}"
+        ) from None
     console.print(_summary_table(summary))
     console.print(f"wrote {out / 'episodes.jsonl'} and {summary}")
 
@@ -432,7 +554,30 @@ def _split_words(values: list[str]) -> list[str]:
 
 
 def _split_paths(values: list[Path]) -> list[Path]:
-    return [Path(w) for w in _split_words([str(v) for v in values])]
+    """Each value is one path, whatever it holds (spaces, commas, any character). Only a
+    value that is no path but whose comma-separated parts all are is read as a list (the
+    old ``--runs a,b`` form)."""
+    out: list[Path] = []
+    for value in values:
+        parts = [p.strip() for p in str(value).split(",")]
+        if not Path(value).exists() and len(parts) > 1 and all(Path(p).exists() for p in parts):
+            out += [Path(p) for p in parts]
+        else:
+            out.append(Path(value))
+    return out
+
+
+def _split_sources(values: list[str], names: tuple[str, ...]) -> list[str]:
+    """``--policy`` values: built-in names (``boustrophedon random`` or ``a,b`` still split)
+    or run folders, each taken whole (spaces, commas and any character kept)."""
+    out: list[str] = []
+    for value in values:
+        words = _split_words([value])
+        if not Path(value).exists() and words and all(w in names for w in words):
+            out += words
+        else:
+            out += [str(p) for p in _split_paths([Path(value)])]
+    return out
 
 
 def _summary_table(path: Path) -> Table:
@@ -494,7 +639,18 @@ def advise(
     prompt = prompts[0]
     console.rule("prompt")
     console.print(prompt, markup=False, highlight=False)
-    answer = backend.advise(prompts, views)[0]
+    from pirl.advice.health import advise_within, location
+
+    limit = cfg.advisor.probe_timeout_s
+    if backend.name == "openai":
+        console.print(f"asking {backend.label} at {location(backend)} (up to {limit:g} s)...")
+    answers = advise_within(backend, prompts, views, limit)
+    if answers is None:
+        raise UserError(
+            f"advisor {backend.label} ({location(backend)}) gave no answer within {limit:g} s "
+            "(advisor.probe_timeout_s); check that the server is serving"
+        )
+    answer = answers[0]
     console.rule(f"answer from {backend.label}")
     console.print(answer.text or "(no text)", markup=False, highlight=False)
     console.rule("result")
@@ -528,7 +684,7 @@ def _copies_format_example(rec: Any, prompt: str) -> bool:
     )
 
 
-MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds")
+MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds", "--policy")
 
 
 def expand_multi_values(argv: list[str]) -> list[str]:

@@ -25,6 +25,7 @@ def _serve(conn: Any, factory: Callable[[], Advisor], threads: int | None) -> No
     from pirl import _quiet
 
     _quiet.install()  # the parent's filters do not reach a spawned child
+    _quiet.ignore_sigint()  # Ctrl-C is the parent's: it closes this child (no traceback here)
     if threads:
         import torch
 

@@ -23,6 +23,7 @@ import numpy as np
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_policy
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
+from pirl.agents.run_folder import folder_contents, lock_folder, release_folder
 from pirl.world.config import ConfigError, UserError
 
 Progress = Callable[[int, int], None]
@@ -99,6 +100,20 @@ def distill(
     advice = build_pirl_advice(cfg, probe=True, seed=seed)
     advisor, student, dataset = advice.advisor, advice.student, advice.dataset
     assert student is not None and dataset is not None
+    # One writer per student folder: the work happens in out.tmp, locked (a second distill
+    # into the same --out is refused with the holder's PID), and is renamed into place.
+    tmp = out.with_name(out.name + ".tmp")
+    try:
+        tmp.mkdir(parents=True, exist_ok=True)
+        lock_folder(tmp, "student folder")
+    except BaseException:
+        advisor.close()
+        raise
+    for stale in folder_contents(tmp):  # a copy left by a killed earlier attempt
+        if stale.is_dir():
+            shutil.rmtree(stale)
+        else:
+            stale.unlink()
     started = time.perf_counter()
     try:
         prompts, views, feats = collect_states(cfg, advisor, policies, states, seed)
@@ -140,12 +155,10 @@ def distill(
         "prompt_variant": cfg.pare.prompt_variant,
         "seconds": round(time.perf_counter() - started, 1),
     }
-    tmp = out.with_name(out.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)  # a copy left by a killed earlier attempt
-    tmp.mkdir(parents=True)
     student.save(tmp / "student.pt")
     (tmp / "student.json").write_text(json.dumps(record, indent=2))
     os.replace(tmp, out)
+    release_folder(tmp)
     return record
 
 

@@ -132,6 +132,7 @@ def _worker_init() -> None:
     from pirl import _quiet
 
     _quiet.install()
+    _quiet.ignore_sigint()  # Ctrl-C is the parent's: one line, no worker tracebacks
 
 
 def _train_job(job: PlannedRun, cfg_dict: dict[str, Any], run: str, resume: bool) -> float:
