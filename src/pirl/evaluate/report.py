@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pirl.evaluate.summary import read_summary
+from pirl.evaluate.summary import honest_label, read_summary
 
 # The paper's results (DESIGN.md section 1): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
@@ -214,6 +214,9 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
     ]
     for name, s in sorted(runs.items()):
         steps = max(1, int(s["steps"]))
+        label = s.get("label", "")
+        if "source" in s:
+            label = honest_label(label, [s["source"]])
         teacher = s.get("steps_teacher", s.get("steps_fresh", 0) + s.get("steps_stale", 0))
         unshaped = s.get("steps_unshaped", s.get("steps_missing", 0))
         agreement = (
@@ -223,7 +226,7 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
         )
         spent = s.get("budget_exhausted_at_step", -1)
         lines.append(
-            f"| {name} | {s.get('label', '')} | {s.get('steps_student', 0) / steps:.0%} | "
+            f"| {name} | {label} | {s.get('steps_student', 0) / steps:.0%} | "
             f"{teacher / steps:.0%} | {unshaped / steps:.0%} | "
             f"{s.get('mean_staleness', 0.0):.1f} | {s.get('teacher_calls_per_step', 0.0):.4f} | "
             f"{agreement} | {spent if spent >= 0 else 'not spent'} |"
@@ -238,11 +241,15 @@ def improvement_table(records: list[dict[str, Any]], act: str) -> str:
 
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     labels: dict[str, str] = {}
+    sources: dict[str, set[str]] = {}
     for r in records:
         if r.get("act", "greedy") not in (act, "fixed"):
             continue
         groups.setdefault((r["method"], r["sim"], r["size"]), []).append(r)
         labels[r["method"]] = r.get("label", r["method"])
+        if r.get("source"):
+            sources.setdefault(r["method"], set()).add(str(r["source"]))
+    labels = {m: honest_label(lab, sources.get(m, ())) for m, lab in labels.items()}
     pirls = sorted({m for m, _, _ in groups if m.startswith("pirl")}, key=_method_order)
     others = sorted({m for m, _, _ in groups if not m.startswith("pirl")}, key=_method_order)
     if not pirls or not others:

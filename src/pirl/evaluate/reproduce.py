@@ -28,6 +28,7 @@ from pirl.agents.loading import (
 from pirl.agents.runs import train_one
 from pirl.evaluate.runner import EvalPlan, distinct_specs, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
+from pirl.evaluate.summary import honest_label
 from pirl.world.config import ConfigError
 
 Log = Callable[[str], None]
@@ -345,7 +346,8 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
         )
         result = run_episode(env, policy, seed, record=True, frame_every=cfg.reproduce.gif_every)
         how = f", act {act}" if spec.source not in BUILTIN else ""
-        gifs[f"{spec.label}{how}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
+        label = honest_label(spec.label, [spec.source])
+        gifs[f"{label}{how}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
             result.frames, folder / f"{spec.key}.gif", fps=12
         )
     return gifs
@@ -439,7 +441,7 @@ def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
     for run in runs:
         path = run / "advisor_stats.json"
         if path.is_file():
-            stats[run.name] = json.loads(path.read_text())
+            stats[run.name] = {**json.loads(path.read_text()), "source": str(run)}
     calls = 0
     if episodes.is_file():
         for line in episodes.open():

@@ -11,6 +11,7 @@ interval over runs is a point.
 from __future__ import annotations
 
 import csv
+import logging
 import math
 import os
 from collections import defaultdict
@@ -21,7 +22,11 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+log = logging.getLogger(__name__)
+
 HEADLINE = ("vcr", "be", "rvc")
+DEFAULT_MIN_SHAPED = 0.5
+"""``pare.min_shaped`` of runs whose config predates the setting."""
 BOOTSTRAP_REPS = 1000
 POI_REPS = 1000
 OTHER = (
@@ -121,9 +126,66 @@ def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row[f"{metric}_{key}"] = est[key]
         for metric in OTHER:
             row[f"{metric}_mean"] = float(np.mean([g.get(metric, 0.0) for g in group]))
-        row["label"] = group[0].get("label", method)
+        row["label"] = honest_label(group[0].get("label", method), _sources(group))
         rows.append(row)
     return rows
+
+
+def _sources(group: list[dict[str, Any]]) -> list[str]:
+    return sorted({str(r["source"]) for r in group if r.get("source")})
+
+
+def _run_shaping(source: str) -> tuple[float, int, int] | None:
+    """(pare.min_shaped, steps, unshaped steps) of a PIRL run folder, None for other runs."""
+    import json
+
+    import yaml
+
+    folder = Path(source)
+    stats_path = folder / "advisor_stats.json"
+    if not stats_path.is_file():
+        return None
+    try:
+        stats = json.loads(stats_path.read_text())
+        cfg = yaml.safe_load((folder / "config.yaml").read_text()) or {}
+    except (OSError, ValueError):
+        return None
+    steps = int(stats.get("steps") or 0)
+    if steps <= 0:
+        return None
+    unshaped = int(stats.get("steps_unshaped", stats.get("steps_missing", 0)))
+    min_shaped = float((cfg.get("pare") or {}).get("min_shaped", DEFAULT_MIN_SHAPED))
+    return min_shaped, steps, unshaped
+
+
+def unshaped_share(sources: Iterable[str]) -> float | None:
+    """The unshaped share of a row's PIRL runs (all their steps pooled) when any of them was
+    less than its ``pare.min_shaped`` shaped; None when every run was shaped enough (or the
+    row has no PIRL run)."""
+    found = [s for s in (_run_shaping(str(x)) for x in sources) if s is not None]
+    if not any(1 - unshaped / steps < floor for floor, steps, unshaped in found):
+        return None
+    return sum(u for _, _, u in found) / sum(n for _, n, _ in found)
+
+
+def honest_label(label: str, sources: Iterable[str]) -> str:
+    """``label`` with ``unshaped N%`` when a run behind it was mostly unshaped: such a run
+    trained as PPO-EWRI for most of its steps and must not pass as plain PIRL."""
+    share = unshaped_share(sources)
+    if share is None or "unshaped" in label:
+        return label
+    note = f"unshaped {share:.0%}"
+    return f"{label[:-1]}; {note})" if label.endswith(")") else f"{label} ({note})"
+
+
+def unshaped_warnings(rows: list[dict[str, Any]]) -> list[str]:
+    """One warning line per row label that carries ``unshaped N%``."""
+    labels = sorted({r["label"] for r in rows if "unshaped" in str(r["label"])})
+    return [
+        f"warning: {label}: most of its training steps were not shaped by advice, so it is "
+        "mostly PPO-EWRI (advisor_stats.json of its runs; pare.min_shaped)"
+        for label in labels
+    ]
 
 
 def _order(key: tuple[str, ...]) -> tuple:
@@ -135,6 +197,8 @@ def _order(key: tuple[str, ...]) -> tuple:
 def write_summary(records: list[dict[str, Any]], path: Path) -> list[dict[str, Any]]:
     """Write ``summary.csv`` (atomically) and return its rows."""
     rows = summarize(records)
+    for line in unshaped_warnings(rows):
+        log.warning(line)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS)

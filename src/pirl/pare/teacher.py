@@ -122,6 +122,15 @@ class TeacherQueue:
             self.sent += len(batch.prompts)
         return answers
 
+    @property
+    def in_flight(self) -> int:
+        """Prompts sent whose answers have not been collected."""
+        return len(self._job[0].prompts) if self._job is not None else 0
+
+    def collect_finished(self, t: int) -> list[Answer]:
+        """Collect and store the batch in flight if it has finished (never waits)."""
+        return self._collect(False, 0.0, t)
+
     def _collect(self, wait: bool, timeout_s: float, t: int) -> list[Answer]:
         if self._job is None:
             return []

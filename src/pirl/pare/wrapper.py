@@ -151,6 +151,8 @@ class PareStats:
     answers_late: int = 0
     answers_cached: int = 0
     answers_dropped_ended: int = 0
+    answers_in_flight: int = 0
+    teacher_waiting: int = 0
     teacher_skipped: int = 0
     student_agreement: float = 0.0
     student_majority: float = 0.0
@@ -515,8 +517,9 @@ class PAREVecEnv(VecEnvWrapper):
         label = self.stats.label
         self.stats = copy.deepcopy(state["stats"])
         self.stats.label = label or self.stats.label
+        # A resumed run starts a fresh failure window: it was stopped by failures the user has
+        # since fixed, and old failures must not stop it again before the advisor is heard.
         self._failures.clear()
-        self._failures.extend(state["failures"])
         self._job = None
         if state["pending"] is not None:
             worlds, episodes, step, prompts, views, answers = state["pending"]
@@ -534,6 +537,25 @@ class PAREVecEnv(VecEnvWrapper):
             self.student.load_state_dict(state["student"], self.dataset)
         if self.teacher is not None and state["teacher"] is not None:
             self.teacher.load_state_dict(state["teacher"])
+
+    def settle(self) -> PareStats:
+        """At the end of a run, without waiting: count a teacher batch that has finished, and
+        the prompts still in flight or waiting to be sent (``answers_in_flight``,
+        ``teacher_waiting``), so that no prompt sent goes uncounted."""
+        st = self.stats
+        if self.teacher is not None:
+            teacher = self.teacher
+            with contextlib.suppress(AdvisorFailing):  # the run is over: count, do not stop
+                self._account(teacher.collect_finished(self._t))
+            st.answers_in_flight = teacher.in_flight
+            st.teacher_waiting = len(teacher._prompts)
+            st.prompts_sent = teacher.sent
+        else:
+            with contextlib.suppress(AdvisorFailing):
+                self._collect(wait=False)
+            st.answers_in_flight = len(self._job.prompts) if self._job is not None else 0
+            st.teacher_waiting = int(self._want.sum())
+        return st
 
     def _drain(self) -> None:
         if self._job is not None:
