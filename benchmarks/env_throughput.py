@@ -13,8 +13,12 @@ even where the absolute numbers are noisy (a shared machine):
 - ``VCPPVecEnv``: ``make_vec_env(N)``, the Stable-Baselines3 adapter (per-world info dicts).
 - ``EnvCore``: the batched core alone (one kernel call per step, no API around it).
 
+``--against REV`` adds the batched rows of the code at git revision ``REV`` (its ``src``
+exported to a temporary folder and measured in a child process, interleaved with this code's
+rows, best of two each): the same run measures a change against the code before it.
+
 Usage: ``python benchmarks/env_throughput.py [--seconds 2] [--envs 64] [--size 60x60x3]
-[--footprint paper] [--threads]``.
+[--footprint paper] [--threads] [--against REV]``.
 """
 
 from __future__ import annotations
@@ -86,6 +90,58 @@ def naive_rate(settings: dict, seconds: float) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def core_rates(settings: dict, envs: int, seconds: float) -> dict[str, float]:
+    """Agent-steps/s of the SB3 adapter and of the batched core (the rows --against compares)."""
+    cfg = VCPPConfig(**{**settings, "size": tuple(settings["size"])})
+    sb3 = make_vec_env(envs, 0, cfg)
+    sb3.reset()
+    core = EnvCore(cfg, envs)
+    for e in range(envs):
+        core.reset_world(e, np.random.default_rng(e))
+    return {
+        "VCPPVecEnv": batched_rate(sb3.step, envs, seconds),
+        "EnvCore": batched_rate(core.step, envs, seconds),
+    }
+
+
+def old_core_rates(rev: str, settings: dict, envs: int, seconds: float) -> dict[str, float]:
+    """:func:`core_rates` of the code at git revision ``rev``, in a child process."""
+    import json
+    import tempfile
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    folder = tempfile.mkdtemp(prefix="pirl-old-")
+    archive = subprocess.run(
+        ["git", "archive", rev, "src"], cwd=root, capture_output=True, check=True
+    ).stdout
+    subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+    code = (
+        "import json, sys; sys.path.insert(0, 'benchmarks');"
+        "from env_throughput import core_rates;"
+        f"print(json.dumps(core_rates(json.loads(sys.argv[1]), {envs}, {seconds})))"
+    )
+    env = dict(os.environ, PYTHONPATH=os.path.join(folder, "src"), PYTHONWARNINGS="ignore")
+    out = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(settings)],
+        capture_output=True, text=True, env=env, cwd=root, check=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def compare(rev: str, settings: dict, envs: int, seconds: float) -> None:
+    """This code's batched rows against revision ``rev``'s, interleaved, best of two."""
+    new: dict[str, float] = {}
+    old: dict[str, float] = {}
+    for _ in range(2):
+        for key, value in old_core_rates(rev, settings, envs, seconds).items():
+            old[key] = max(old.get(key, 0.0), value)
+        for key, value in core_rates(settings, envs, seconds).items():
+            new[key] = max(new.get(key, 0.0), value)
+    print(f"\nagainst {rev} ({envs} worlds): agent-steps/s, this code / {rev}")
+    for key in new:
+        print(f"{key:<28} {new[key]:>12,.0f} {old[key]:>12,.0f} {new[key] / old[key]:>8.2f}x")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="timing per row")
@@ -93,10 +149,15 @@ def main() -> None:
     parser.add_argument("--size", default="60x60x3")
     parser.add_argument("--footprint", default="paper", choices=("paper", "frustum"))
     parser.add_argument("--threads", action="store_true", help="also numba threads (parallel)")
+    parser.add_argument("--against", metavar="REV", help="also measure git revision REV")
+    parser.add_argument("--settings", default="{}", help="JSON of extra env settings")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
-    settings = {"size": list(size), "footprint": args.footprint}
-    cfg = VCPPConfig(size=size, footprint=args.footprint)
+    import json
+
+    extra = json.loads(args.settings)
+    settings = {"size": list(size), "footprint": args.footprint, **extra}
+    cfg = VCPPConfig(size=size, footprint=args.footprint, **extra)
     n = args.envs
 
     rows: list[tuple[str, float]] = [("naive (numba off)", naive_rate(settings, args.seconds))]
@@ -123,6 +184,8 @@ def main() -> None:
     print(f"{'env':<28} {'steps/s':>12} {'x naive':>8} {'x single':>9}")
     for name, value in rows:
         print(f"{name:<28} {value:>12,.0f} {value / naive:>8.1f} {value / single:>9.1f}")
+    if args.against:
+        compare(args.against, settings, n, args.seconds)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,164 @@
+"""Agent settings sweep: action masking and observation blocks, judged at scale in both act modes.
+
+Trains PPO-EWRI and PIRL with oracle advice (the profile's ``reproduce.pirl_variants``) for
+every variant below and every training seed, with ``pirl reproduce``'s training (worker
+processes, one folder per variant), then plays every run on larger worlds than it trained on,
+acting stochastic and greedy, next to the boustrophedon planner on the same scenarios. Rows:
+VCR IQM over training seeds [stratified bootstrap 95% interval], the worst seed, steps, steps
+relative to the planner, camera share. ``--split validation`` (the default) plays validation
+scenarios, which no evaluation uses: settings are chosen there. ``--split evaluation`` plays the
+evaluation scenarios of ``pirl reproduce`` (the ablation reported in docs/results.md).
+
+Usage (docs/results.md gives the commands that produced its tables)::
+
+    python benchmarks/agent_sweep.py --variants unmasked masked masked-memory \
+        --seeds 0 1 --sizes 30 45 60 --episodes 6 --out results/agent-sweep
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from pirl.agents.config import RunConfig
+from pirl.agents.loading import load_policy
+from pirl.evaluate.reproduce import train_all
+from pirl.evaluate.rollout import run_batch, run_episode
+from pirl.evaluate.scenarios import parse_size, scenario_seeds, size_name, validation_seeds
+from pirl.evaluate.summary import interval_estimates
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# name -> overrides of the profile (sections env and ppo); every variant trains the same runs.
+VARIANTS: dict[str, dict[str, dict]] = {
+    "unmasked": {"ppo": {"action_masking": False}},
+    "masked": {"ppo": {"action_masking": True}},
+    "masked-memory": {
+        "ppo": {"action_masking": True},
+        "env": {"obs_visits": True, "obs_target": True},
+    },
+    "masked-visits": {"ppo": {"action_masking": True}, "env": {"obs_visits": True}},
+    "masked-target": {"ppo": {"action_masking": True}, "env": {"obs_target": True}},
+}
+
+
+def planner_steps(env_cfg, seeds: list[int]) -> tuple[list[float], list[float]]:
+    """The boustrophedon planner's steps and VCR on each scenario."""
+    from pirl.env.vcpp_env import VCPPEnv
+
+    env = VCPPEnv(env_cfg)
+    steps, vcr = [], []
+    for seed in seeds:
+        m = run_episode(env, load_policy("boustrophedon"), seed).metrics
+        steps.append(m["steps"])
+        vcr.append(m["vcr"])
+    return steps, vcr
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--profile", default=str(ROOT / "configs" / "study-agents.yaml"))
+    parser.add_argument("--variants", nargs="+", default=["masked", "masked-memory"],
+                        choices=sorted(VARIANTS))  # fmt: skip
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--steps", type=int, default=None, help="PPO steps (default: profile)")
+    parser.add_argument("--sizes", nargs="+", default=["30", "45", "60"])
+    parser.add_argument("--episodes", type=int, default=6, help="scenarios per size")
+    parser.add_argument("--split", default="validation", choices=("validation", "evaluation"))
+    parser.add_argument("--workers", type=int, default=None, help="training processes")
+    parser.add_argument("--out", type=Path, default=Path("results/agent-sweep"))
+    args = parser.parse_args()
+
+    base = RunConfig.from_yaml(args.profile)
+    if args.steps:
+        base = base.with_overrides(train={"total_steps": args.steps})
+    base = base.with_overrides(reproduce={"seeds": args.seeds})
+    pick = validation_seeds if args.split == "validation" else scenario_seeds
+    sizes = [parse_size(s) for s in args.sizes]
+    planner = {}
+    for size in sizes:
+        env = base.env.replace(size=size)
+        planner[size] = planner_steps(env, pick(size, args.episodes))
+    rows = []
+    for variant in args.variants:
+        cfg = base.with_overrides(**VARIANTS[variant])
+        runs = train_all(cfg, args.out / variant, "oracle", print, False, workers=args.workers)
+        groups: dict[str, list[Path]] = {}
+        for run in runs:
+            groups.setdefault(run.name.rsplit("-s", 1)[0], []).append(run)
+        for group, members in groups.items():
+            label = json.loads((members[0] / "meta.json").read_text()).get("label", group)
+            trained_env = RunConfig.from_dict(
+                yaml.safe_load((members[0] / "config.yaml").read_text())
+            ).env
+            for size in sizes:
+                seeds = pick(size, args.episodes)
+                p_steps, p_vcr = planner[size]
+                env = trained_env.replace(size=size)
+                for act in ("stochastic", "greedy"):
+                    per_seed_vcr, per_seed_steps, ratios, cams = [], [], [], []
+                    for run in members:
+                        metrics = run_batch(env, load_policy(run, act=act), seeds)
+                        per_seed_vcr.append(np.mean([m["vcr"] for m in metrics]))
+                        per_seed_steps.append(np.mean([m["steps"] for m in metrics]))
+                        ratios.append(
+                            np.mean([m["steps"] / p for m, p in zip(metrics, p_steps, strict=True)])
+                        )
+                        cams.append(np.mean([m["camera_share"] for m in metrics]))
+                    est = interval_estimates(np.array(per_seed_vcr)[:, None])
+                    rows.append({
+                        "variant": variant, "method": group, "label": label, "size": size_name(size),
+                        "act": act, "seeds": len(members), "vcr_iqm": est["iqm"],
+                        "vcr_iqm_lo": est["iqm_lo"], "vcr_iqm_hi": est["iqm_hi"],
+                        "vcr_min_seed": float(min(per_seed_vcr)),
+                        "vcr_per_seed": " ".join(f"{v:.3f}" for v in per_seed_vcr),
+                        "steps": float(np.mean(per_seed_steps)),
+                        "steps_vs_planner": float(np.mean(ratios)),
+                        "planner_steps": float(np.mean(p_steps)),
+                        "planner_vcr": float(np.mean(p_vcr)),
+                        "vcr_per_100_steps": float(
+                            100 * np.mean(per_seed_vcr) / max(1.0, np.mean(per_seed_steps))
+                        ),
+                        "camera_share": float(np.mean(cams)),
+                    })  # fmt: skip
+                    r = rows[-1]
+                    print(
+                        f"{variant:>14} {group:>22} {r['size']:>8} {act:>10}  VCR IQM "
+                        f"{r['vcr_iqm']:.3f} [{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] "
+                        f"min {r['vcr_min_seed']:.3f}  steps x{r['steps_vs_planner']:.2f} "
+                        f"planner  cam {r['camera_share']:.2f}",
+                        flush=True,
+                    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    with open(args.out / "sweep.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    lines = [
+        f"Agent sweep on {args.split} scenarios ({args.episodes} per size), profile "
+        f"{Path(args.profile).name}, {base.train.total_steps:,} PPO steps, training seeds "
+        f"{args.seeds}\n",
+        "| variant | method | size | act | VCR IQM [95% interval] | per seed | steps "
+        "| x planner's steps | VCR / 100 steps | camera share |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['variant']} | {r['label']} | {r['size']} | {r['act']} | {r['vcr_iqm']:.3f} "
+            f"[{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] | {r['vcr_per_seed']} | "
+            f"{r['steps']:.0f} | {r['steps_vs_planner']:.2f} | {r['vcr_per_100_steps']:.3f} | "
+            f"{r['camera_share']:.2f} |"
+        )
+    text = "\n".join(lines) + "\n"
+    (args.out / "sweep.md").write_text(text)
+    print(text)
+    print(f"results: {args.out / 'sweep.md'} and {args.out / 'sweep.csv'}")
+
+
+if __name__ == "__main__":
+    main()
