@@ -112,8 +112,9 @@ def main() -> None:
                         cams.append(np.mean([m["camera_share"] for m in metrics]))
                     est = interval_estimates(np.array(per_seed_vcr)[:, None])
                     rows.append({
-                        "variant": variant, "method": group, "label": label, "size": size_name(size),
-                        "act": act, "seeds": len(members), "vcr_iqm": est["iqm"],
+                        "variant": variant, "method": group, "label": label,
+                        "size": size_name(size), "act": act, "seeds": len(members),
+                        "vcr_iqm": est["iqm"],
                         "vcr_iqm_lo": est["iqm_lo"], "vcr_iqm_hi": est["iqm_hi"],
                         "vcr_min_seed": float(min(per_seed_vcr)),
                         "vcr_per_seed": " ".join(f"{v:.3f}" for v in per_seed_vcr),
