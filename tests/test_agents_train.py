@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 import torch
-from stable_baselines3 import PPO
 
 from pirl.agents.config import RunConfig
+from pirl.agents.loading import load_model
 from pirl.agents.train import train
 from pirl.world.config import ConfigError
 
@@ -22,8 +22,8 @@ TEST_CFG = ROOT / "configs" / "test.yaml"
 
 
 def _same_weights(a: Path, b: Path) -> bool:
-    sa = PPO.load(a, device="cpu").policy.state_dict()
-    sb = PPO.load(b, device="cpu").policy.state_dict()
+    sa = load_model(a, device="cpu").policy.state_dict()
+    sb = load_model(b, device="cpu").policy.state_dict()
     return all(torch.equal(sa[k], sb[k]) for k in sa)
 
 

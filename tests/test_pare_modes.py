@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from stable_baselines3 import PPO
 
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.budget import Budget, BudgetedAdvisor
@@ -28,6 +27,7 @@ from pirl.advice.student import (
     teacher_key,
 )
 from pirl.agents.config import RunConfig
+from pirl.agents.loading import load_model
 from pirl.agents.pirl_advice import build_pirl_advice, pirl_label
 from pirl.agents.train import TrainingStopped, train
 from pirl.env import make_vec_env
@@ -300,7 +300,7 @@ def test_build_pirl_advice_refuses_a_student_of_another_teacher(tmp_path):
 
 
 def _weights(path: Path) -> dict:
-    return PPO.load(path, device="cpu").policy.state_dict()
+    return load_model(path, device="cpu").policy.state_dict()
 
 
 @pytest.mark.parametrize("mode", ["student", "sync"])

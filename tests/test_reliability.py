@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
-from stable_baselines3 import PPO
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
+from pirl.agents.loading import load_model
 from pirl.agents.train import Progress, train
 from pirl.evaluate import runner
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
@@ -51,8 +51,8 @@ def _one_clean_line(proc: subprocess.CompletedProcess, *needles: str) -> str:
 
 
 def _same_weights(a: Path, b: Path) -> bool:
-    sa = PPO.load(a, device="cpu").policy.state_dict()
-    sb = PPO.load(b, device="cpu").policy.state_dict()
+    sa = load_model(a, device="cpu").policy.state_dict()
+    sb = load_model(b, device="cpu").policy.state_dict()
     return all(torch.equal(sa[k], sb[k]) for k in sa)
 
 

@@ -252,6 +252,18 @@ def load_policy(
     return PPOPolicy(model, method, device, masked).set_act(act)
 
 
+def load_model(path: Path, device: str = "cpu") -> Any:
+    """The SB3 model in ``path`` (a run's model.zip): ``MaskablePPO`` when its run trained
+    with action masks, else ``PPO``."""
+    from stable_baselines3 import PPO
+
+    if run_masked(Path(path).parent):
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO.load(path, device=device)
+    return PPO.load(path, device=device)
+
+
 def run_masked(run: Path) -> bool:
     """Whether a finished run trained with valid-action masks (its own config.yaml says;
     runs made before masking existed did not)."""
