@@ -11,7 +11,9 @@ Prints, in one run on the same machine:
 3. where the time goes, per phase, as PufferLib's trainer prints it: env step (inside the
    VecEnv, advice excluded), policy forward (the rollout's ``policy(obs)`` calls), PPO update
    (``train()``), advisor (PARE waiting for answers) and the rest (rollout buffer, tensor
-   copies, callbacks), in seconds and as a share of wall time.
+   copies, callbacks), in seconds and as a share of wall time;
+4. PPO with valid-action masks (sb3-contrib's ``MaskablePPO``) against plain PPO on the same
+   batched env: the line ``masked / unmasked training throughput``.
 
 Usage: ``python benchmarks/train_throughput.py [--steps 16384] [--envs 16]
 [--advisor local|oracle] [--mode student|async|sync]``.
@@ -145,15 +147,24 @@ def main() -> None:
             args.steps,
         )
     )
+    masking = {}
+    for masked in (False, True):
+        case = cfg.with_overrides(ppo={"action_masking": masked})
+        name = "MaskablePPO" if masked else "PPO, no masks"
+        row = run_case(name, make_vec_env(args.envs, 0, env_cfg), case, args.steps)
+        rows.append(row)
+        masking[masked] = row["sps"]
     stats = None
+    pirl_row = None
     if not args.no_pirl:
         # Cold cache: every prompt reaches the LLM, which runs in its own process as in training.
         advisor = make_advisor(args.advisor, cfg, cache=False, process=True)
         advice = build_pirl_advice(cfg, advisor, probe=False)
         stack = build_env_stack("pirl", cfg, seed=0, advice=advice)
-        rows.append(
-            run_case(f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare)
+        pirl_row = run_case(
+            f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare
         )
+        rows.append(pirl_row)
         stats = stack.pare.stats.as_dict()
         stack.pare.close()
 
@@ -164,9 +175,10 @@ def main() -> None:
         cells = [f"{r[p]:6.1f}s {r[p] / r['wall']:>5.0%}" for p in PHASES]
         print(f"{r['name']:<24} {r['sps']:>9,.0f} {r['sps'] / base:>7.2f} " + " ".join(cells))
     print(f"make_vec_env / DummyVecEnv: {base / rows[1]['sps']:.1f}x")
-    if stats is None:
+    print(f"masked / unmasked training throughput: {masking[True] / masking[False]:.2f}x")
+    if stats is None or pirl_row is None:
         return
-    print(f"PIRL / PPO-EWRI (make_vec_env): {rows[3]['sps'] / base:.0%}")
+    print(f"PIRL / PPO-EWRI (make_vec_env): {pirl_row['sps'] / base:.0%}")
     print(f"PIRL label: {stats['label']}")
     print(
         "PIRL advice: "
