@@ -20,7 +20,7 @@ from pirl.env.vcpp_env import VCPPEnv
 from pirl.evaluate.rollout import run_episode
 from pirl.physics import Mission, PhysicsConfig, Pose, run_physics_episode
 from pirl.physics.coverage import view_angles
-from pirl.physics.mission import CAMERA, MOVE, REFUSED, normalized_power, touching
+from pirl.physics.mission import CAMERA, ENERGY_CAUSES, MOVE, REFUSED, normalized_power, touching
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.physics.webots.controller import mission_from_args, parse_args
 from pirl.physics.webots.pilot import MavicPilot
@@ -216,6 +216,9 @@ def test_timeout_and_drift_are_recorded() -> None:
 def test_energy_model_and_contact_helpers() -> None:
     assert normalized_power(np.ones(4)) == pytest.approx(1.0)
     assert normalized_power(np.full(4, 1.1)) == pytest.approx(1.331)
+    # Rotors beyond the real drone's top speed are charged at it.
+    capped = normalized_power(np.array([3.4, 3.4, 1.0, 1.0]), 1.5)
+    assert capped == pytest.approx((2 * 1.5**3 + 2) / 4)
     spheres = np.array([[2.0, 0.0, 1.0, 1.0]])
     assert touching(np.array([0.95, 0.0, 1.0]), spheres, 0.1)
     assert not touching(np.array([0.8, 0.0, 1.0]), spheres, 0.1)
@@ -303,6 +306,79 @@ def test_collision_with_a_sphere_is_detected_and_the_drone_bounces_back() -> Non
         assert mission.world.position(0) == (1, 2, 1)
         _step(mission, flight, 2)  # y+ away from the sphere: no new collision
     assert mission.metrics()["collisions"] == 1
+
+
+def _causes(m: dict) -> dict[str, float]:
+    return {c: m[f"energy_{c}"] for c in ENERGY_CAUSES}
+
+
+def test_energy_by_cause_adds_up_and_follows_the_flight() -> None:
+    # x+, z+, z-, a camera action, x+ into the sphere, then x- out of the grid twice.
+    mission, flight = _flight(start=(1, 2, 1), obstacles=[[4.2, 2.0, 1.0, 1.5]])
+    with flight:
+        costs = {}
+        for action, cause in ((0, "move"), (4, "climb"), (5, "descend"), (10, "camera")):
+            before = mission.metrics()
+            _step(mission, flight, action)
+            after = mission.metrics()
+            costs[cause] = after[f"energy_{cause}"] - before[f"energy_{cause}"]
+            # Each step's energy lands in its own causes only.
+            changed = {c for c in ENERGY_CAUSES if after[f"energy_{c}"] != before[f"energy_{c}"]}
+            assert changed == ({"hover", "camera"} if cause == "camera" else {cause})
+        _step(mission, flight, 0)  # (2, 2, 1) -> (3, 2, 1) lies inside the sphere
+        for _ in range(3):
+            _step(mission, flight, 1)
+    m = mission.metrics()
+    assert m["contacts"] == 1 and m["geofence"] == 1
+    assert sum(_causes(m).values()) == pytest.approx(m["energy_used"], rel=1e-12)
+    assert m["energy_contact"] > 0 and m["energy_geofence"] > 0 and m["energy_timeout"] == 0
+    assert m["energy_camera"] == pytest.approx(0.2)  # the grid's energy_camera
+    # Calibrated near the grid's table: a one-cell flight costs about 1.1 units.
+    assert all(0.7 < costs[c] < 1.8 for c in ("move", "climb", "descend")), costs
+    assert m["end"] is None  # the episode goes on
+
+
+@pytest.mark.parametrize(
+    ("settings", "end"),
+    [
+        ({"battery_capacity": 1000.0}, "coverage"),
+        ({"battery_capacity": 3.0}, "battery"),
+        ({"battery_capacity": 1000.0, "max_steps": 4}, "step_limit"),
+    ],
+)
+def test_physics_episode_says_why_it_ended(settings: dict, end: str) -> None:
+    from pirl.agents.boustrophedon import BoustrophedonPolicy
+
+    cfg = VCPPConfig(size=(5, 5, 3), scale_by_alpha=False, **{"max_steps": 200, **settings})
+    m = run_physics_episode(cfg, BoustrophedonPolicy(), seed=2, physics=CALM)
+    assert m["end"] == end
+    assert sum(_causes(m).values()) == pytest.approx(m["energy_used"], rel=1e-12)
+    if end == "coverage":
+        assert m["vcr"] == 1.0
+    elif end == "battery":
+        assert m["battery_left"] == 0.0 and m["vcr"] < 1.0
+    else:
+        assert m["steps"] == 4 and m["battery_left"] > 0
+
+
+def test_a_drone_wedged_under_a_sphere_is_put_back_and_charged_a_real_drones_power() -> None:
+    # The geometry of the PPO-EWRI episode (30x30x3, scenario 0, step 55), moved into
+    # a small world: x+ into an obstacle cell wedges the QuadX under the sphere at full
+    # thrust. It used to stay there for every later step, 128 units per 5 s timeout.
+    mission, flight = _flight(
+        size=(8, 8, 3), start=(2, 4, 1), obstacles=[[3.81, 3.75, 1.95, 1.576]]
+    )
+    with flight:
+        _step(mission, flight, 0)
+        m = mission.metrics()
+        assert m["timeouts"] == 1 and m["contacts"] == 1 and m["recoveries"] == 1
+        assert mission.world.position(0) == (2, 4, 1)  # back where it came from
+        # At most the real drone's top power (thrust-to-weight 2.2: 3.3x hover) for 5 s.
+        top = CALM.energy_per_hover_s * CALM.max_thrust_to_weight**1.5 * CALM.step_timeout_s
+        assert 1.0 < m["energy_contact"] + m["energy_timeout"] <= top
+        _step(mission, flight, 1)  # and it flies on
+    m = mission.metrics()
+    assert m["timeouts"] == 1 and mission.world.position(0) == (1, 4, 1)
 
 
 def test_runner_evaluates_the_physics_simulator() -> None:

@@ -53,6 +53,12 @@ class PhysicsConfig:
     """Battery units per second of flight at hover power. Calibrated so that a one-cell x/y
     move costs about energy_move + energy_hover of the grid (1.1 units), so a typical episode
     uses about as much battery as in the grid (docs/physics.md)."""
+    max_thrust_to_weight: float = 2.2
+    """Thrust-to-weight ratio of the real drone the battery is charged for; rotor power is
+    charged at most at the rotor speed of that thrust ((2.2)^1.5 = 3.3x hover power for a
+    Crazyflie 2.x). PyFlyt's cf2x has 7.5x its weight in thrust and its motors saturate when a
+    drone is pressed against an obstacle, which the cube law would charge at up to 39x hover
+    power (docs/physics.md: what a timeout costs)."""
     camera_energy: float | None = None
     """Battery units per camera action for the gimbal and zoom motors; None uses the grid's
     energy_camera (0.2). With the hover during camera_hold_s a camera action then costs about
@@ -91,7 +97,7 @@ class PhysicsConfig:
 def _validate(cfg: PhysicsConfig) -> None:
     positive = (
         "cell_size_m", "level_height_m", "gust_period_s", "tolerance_m", "step_timeout_s",
-        "sample_hz", "position_gain", "max_speed_m_s", "body_radius_m",
+        "sample_hz", "position_gain", "max_speed_m_s", "body_radius_m", "max_thrust_to_weight",
     )  # fmt: skip
     for name in positive:
         value = getattr(cfg, name)
@@ -103,6 +109,10 @@ def _validate(cfg: PhysicsConfig) -> None:
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
             raise ConfigError(f"physics.{name}={value!r}: must be a number >= 0")
+    if not cfg.max_thrust_to_weight >= 1:
+        raise ConfigError(
+            f"physics.max_thrust_to_weight={cfg.max_thrust_to_weight!r}: must be >= 1 (hover)"
+        )
     wind = cfg.wind_mean
     if not (
         isinstance(wind, tuple | list)

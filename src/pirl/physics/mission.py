@@ -33,7 +33,9 @@ Rules (DESIGN.md sections 3 and 10; docs/physics.md):
 - **Battery.** ``energy_per_hover_s`` units per second of hover-equivalent power, where the
   power relative to hover is the mean cube of the rotors' speed relative to hover speed
   (:func:`normalized_power`), plus ``camera_energy`` per camera action. Same capacity, step
-  limit and BE formula as the grid.
+  limit and BE formula as the grid. Every unit is booked to one cause
+  (:data:`ENERGY_CAUSES`, the ``energy_<cause>`` metrics, which add up to ``energy_used``),
+  and the episode's ``end`` says why it ended (``coverage``, ``battery`` or ``step_limit``).
 """
 
 from __future__ import annotations
@@ -57,6 +59,17 @@ from pirl.world.state import Scenario, WorldBatch, draw_scenario
 Cell = tuple[int, int, int]
 
 MOVE, CAMERA, REFUSED = "move", "camera", "refused"
+
+ENERGY_CAUSES = ("move", "climb", "descend", "hover", "camera", "geofence", "timeout", "contact")
+"""Where a physics episode's battery went, one ``energy_<cause>`` metric each (they add up to
+``energy_used``): ``move``, ``climb``, ``descend``: flight of x/y, z+ and z- moves that reached
+their waypoint, up to a contact; ``hover``: holding the cell during camera actions;
+``camera``: the gimbal and zoom motors; ``geofence``: holding the cell after a move refused by
+the geofence; ``timeout``: flight of moves that ran out ``step_timeout_s``, up to a contact;
+``contact``: flight after a contact that counted as a collision, to the end of its step."""
+
+END_REASONS = ("coverage", "battery", "step_limit")
+"""Why an episode ended (the ``end`` field of its metrics), checked in this order."""
 
 
 @dataclass(frozen=True)
@@ -88,13 +101,14 @@ class StepPlan:
     """(tilt degrees, pan degrees, zoom tenths) for this step."""
 
 
-def normalized_power(speed_ratios: np.ndarray) -> float:
+def normalized_power(speed_ratios: np.ndarray, max_ratio: float = np.inf) -> float:
     """Electrical power relative to hover, from each rotor's speed relative to hover speed.
 
     Momentum theory: a rotor's induced power grows as thrust^1.5 and its thrust as speed^2,
-    so its power grows as speed^3. The mean over rotors is 1.0 in a steady hover.
+    so its power grows as speed^3. The mean over rotors is 1.0 in a steady hover. Speed
+    ratios above ``max_ratio`` (the real drone's top rotor speed) are charged at it.
     """
-    r = np.abs(np.asarray(speed_ratios, dtype=np.float64))
+    r = np.minimum(np.abs(np.asarray(speed_ratios, dtype=np.float64)), max_ratio)
     return float(np.dot(r * r, r)) / r.size
 
 
@@ -152,6 +166,10 @@ class Mission:
         size = self.cfg.size
         return tuple(int(min(max(c[a], 0), size[a] - 1)) for a in range(3))  # type: ignore[return-value]
 
+    def in_obstacle(self, pose: Pose) -> bool:
+        """Whether ``pose`` rounds to an obstacle cell (the drone is pressed into a sphere)."""
+        return bool(self.world.blocked[0][self.nearest_cell(pose.position)])
+
     def obstacle_spheres_m(self) -> np.ndarray:
         """The scenario's obstacles as spheres in metres: rows (cx, cy, cz, radius)."""
         if self.scenario is None:
@@ -197,6 +215,8 @@ class Mission:
         self.contacts = 0
         self.geofence = 0
         self.energy_used = 0.0
+        self.energy_by_cause = dict.fromkeys(ENERGY_CAUSES, 0.0)
+        self.end: str | None = None
         self._track_sum = 0.0
         self._steps_done = 0
         self.plan = None
@@ -233,7 +253,15 @@ class Mission:
         self._target_m = self.cell_position(target)
         self._t = 0.0
         self._next_sample = self._sample_period
+        # Hover-equivalent seconds of flight before and after this step's first collision
+        # contact, booked to causes at the step's end (a timeout is known only then).
         self._power_s = 0.0
+        self._power_after_contact_s = 0.0
+        self._contact_hit = False
+        if kind == MOVE:
+            self._cause = {D.Z_PLUS: "climb", D.Z_MINUS: "descend"}.get(action, "move")
+        else:
+            self._cause = "hover" if kind == CAMERA else "geofence"
         self._collided = kind == REFUSED
         self._timed_out = False
         self._seen[:] = False
@@ -253,7 +281,10 @@ class Mission:
             raise RuntimeError("call begin_step() first")
         p = self.physics
         self._t += dt
-        self._power_s += power * dt
+        if self._contact_hit:
+            self._power_after_contact_s += power * dt
+        else:
+            self._power_s += power * dt
         if contact:
             # A collision is a contact that begins, or one made pushing into an obstacle cell:
             # a drone merely resting against a sphere (a free cell can lie closer to a sphere
@@ -261,6 +292,7 @@ class Mission:
             pushing = plan.kind == MOVE and self._target_blocked
             if not self._collided and (pushing or not self._in_contact):
                 self._collided = True
+                self._contact_hit = True
                 self.contacts += 1
             if plan.kind == MOVE and self._target_blocked and not self._bounced:
                 # Bounce back from an obstacle cell to the cell it came from. A move between
@@ -326,15 +358,17 @@ class Mission:
         row = w.ints[0]
         self.sample(pose)  # the arrival view (a repeat of the last sample costs nothing)
         cell = self.nearest_cell(pose.position)
+        if w.blocked[0][cell]:
+            # The drone pressed into an obstacle's sphere deeper than half a cell: the grid has
+            # no such position (observations, planners and visits assume free cells), so the
+            # step is booked at the free cell it came from, like a bounce.
+            cell = plan.origin
         row[D.PX], row[D.PY], row[D.PZ] = cell
         moved = cell != plan.origin
         cam_changed = plan.camera != self._camera_before
 
         new = self._book_view()
-        used = self.physics.energy_per_hover_s * self._power_s
-        if plan.kind == CAMERA:
-            used += self._camera_energy
-        self.energy_used += used
+        used = self._book_energy(plan)
         curiosity = D.visit(0, w.ints, w.visits) if moved else 0.0
         intended = self.nearest_cell(self._target_m)
         off_target = cell != intended and not self._collided
@@ -352,13 +386,22 @@ class Mission:
         flags = w.flags[0]
         terminated, truncated = bool(flags[D.F_TERMINATED]), bool(flags[D.F_TRUNCATED])
         self.done = terminated or truncated
+        if self.done:
+            self.end = self._end_reason(truncated)
         self.plan = None
         return self._observation(), terminated, truncated, self._info()
 
+    @property
+    def timed_out(self) -> bool:
+        """Whether the step being flown has run out ``step_timeout_s``."""
+        return self._timed_out
+
     # -- results --------------------------------------------------------------------------
-    def metrics(self) -> dict[str, float]:
-        """The grid's episode metrics plus the physics extras (docs/physics.md)."""
-        out: dict[str, float] = episode_metrics(self.world, 0)
+    def metrics(self) -> dict[str, Any]:
+        """The grid's episode metrics plus the physics extras (docs/physics.md): counters,
+        ``energy_<cause>`` for each of :data:`ENERGY_CAUSES` and ``end`` (None while the
+        episode runs)."""
+        out: dict[str, Any] = episode_metrics(self.world, 0)
         steps = max(1, self._steps_done)
         out.update(
             {
@@ -369,11 +412,37 @@ class Mission:
                 "geofence": self.geofence,
                 "recoveries": self.recoveries,
                 "energy_used": self.energy_used,
+                **{f"energy_{c}": v for c, v in self.energy_by_cause.items()},
+                "end": self.end,
             }
         )
         return out
 
     # -- internals ------------------------------------------------------------------------
+    def _book_energy(self, plan: StepPlan) -> float:
+        """Book this step's battery use to its causes; returns the step's total."""
+        per_s = self.physics.energy_per_hover_s
+        # A move that ran out its time is booked as a timeout up to its first contact, so that
+        # what was lost to unreachable waypoints shows apart from ordinary flight.
+        cause = "timeout" if self._timed_out and plan.kind == MOVE else self._cause
+        parts = {cause: per_s * self._power_s, "contact": per_s * self._power_after_contact_s}
+        if plan.kind == CAMERA:
+            parts["camera"] = self._camera_energy
+        used = 0.0
+        for key, value in parts.items():
+            self.energy_by_cause[key] += value
+            used += value
+        self.energy_used += used
+        return used
+
+    def _end_reason(self, truncated: bool) -> str:
+        row = self.world.ints[0]
+        if row[D.COVERED] >= row[D.COVERABLE]:
+            return "coverage"
+        if not truncated and self.world.energy[0] <= 0.0:
+            return "battery"
+        return "step_limit"
+
     def _book_view(self) -> int:
         """Book this step's view (the union of its samples) with the grid's own booking rule
         (:func:`pirl.world.dynamics.book_view`); the footprint sum takes the arrival view's

@@ -160,23 +160,30 @@ class PyFlytFlight:
     def fly(self, mission: Mission) -> Pose:
         """Fly the mission's current step until it is over; returns the final pose."""
         av, drone = self.aviary, self.drone
-        contacts = av.contact_array
         limit = np.radians(self.physics.recover_tilt_deg)
+        # Thrust grows as rotor speed squared: the real drone's top speed relative to hover.
+        top_speed = float(np.sqrt(self.physics.max_thrust_to_weight))
         while True:
             self._set_target(mission.target_position())
             av.step()
             contacts = av.contact_array
             pose = self.pose()
-            power = normalized_power(drone.motors.throttle / self.hover_throttle)
+            power = normalized_power(drone.motors.throttle / self.hover_throttle, top_speed)
             touched = bool(len(self._spheres) and contacts[drone.Id, self._spheres].any())
             if np.abs(pose.rpy[:2]).max() > limit or contacts[drone.Id, av.planeId]:
                 self._recover(mission)
                 pose = self.pose()
             if mission.update(self.dt, pose, power, touched):
+                if mission.timed_out and (touched or mission.in_obstacle(pose)):
+                    # Wedged against a sphere at full thrust: it would stay there for every
+                    # later step (the issue's 4 timeouts in a row). A crash: put it back.
+                    self._recover(mission)
+                    pose = self.pose()
                 return pose
 
     def _recover(self, mission: Mission) -> None:
-        """Put a tumbled or grounded drone back, level and still, at its last cell's centre."""
+        """Put a tumbled, grounded or wedged drone back, level and still, at its last cell's
+        centre."""
         av, drone = self.aviary, self.drone
         plan = mission.plan
         cell = plan.origin if plan is not None else mission.start
