@@ -40,6 +40,11 @@ class Answer:
         return self.error is None and self.recommendation is not None
 
 
+NO_ANSWER = "no answer within"
+"""How the error of an answer that never came (a deadline passed) starts; a teacher whose
+whole batches end this way has stopped answering (PARE stops training after a few)."""
+
+
 def error_answer(error: str, latency_s: float = 0.0) -> Answer:
     """A failed answer carrying ``error``."""
     return Answer(text="", recommendation=None, latency_s=latency_s, error=error)

@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import urlparse
 
-from pirl.advice.base import Advisor, Answer, error_answer
+from pirl.advice.base import NO_ANSWER, Advisor, Answer, error_answer
 from pirl.advice.parser import parse_recommendation
 
 __all__ = ["OpenAIAdvisor"]
@@ -176,7 +176,7 @@ class OpenAIAdvisor(Advisor):
             left = deadline - time.monotonic()
             if left <= 0.05:
                 return error_answer(
-                    f"no answer within the {self.deadline_s:g} s deadline "
+                    f"{NO_ANSWER} the {self.deadline_s:g} s deadline "
                     f"(advisor.openai_deadline_s) after {attempt} attempt(s)",
                     time.perf_counter() - started,
                 )

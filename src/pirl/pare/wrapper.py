@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
-from pirl.advice.base import Advisor, Answer
+from pirl.advice.base import NO_ANSWER, Advisor, Answer
 from pirl.advice.budget import BUDGET_EXHAUSTED
 from pirl.advice.factory import exhausted
 from pirl.advice.state import advice_requests
@@ -66,6 +66,10 @@ _MISSING, _FRESH, _CACHED, _STALE, _STUDENT = range(5)
 KIND_TEACHER, KIND_CACHED, KIND_STUDENT = 0, 1, 2
 # Columns of the advice metadata array.
 HAS, STEP, KIND = 0, 1, 2
+
+
+SILENT_BATCHES = 3
+"""Teacher batches in a row without a single answer by their deadline that stop training."""
 
 
 class AdvisorFailing(RuntimeError):
@@ -273,6 +277,7 @@ class PAREVecEnv(VecEnvWrapper):
         d_max = float(np.linalg.norm(np.asarray(venv.cfg.size, dtype=np.float64) - 1.0))
         self._consts = np.array([d_max, self.alpha, self.lam_cam, self.lam_move])
         self._failures: deque[bool] = deque(maxlen=max(1, self.failure_window))
+        self._silent = 0  # teacher batches in a row that got no answer at all by the deadline
         self._t = 0
         self._job: _Job | None = None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pare-advisor")
@@ -350,6 +355,7 @@ class PAREVecEnv(VecEnvWrapper):
             self._failures.append(not answer.ok)
         if self._failures:
             st.failure_rate = float(np.mean(self._failures))
+        self._watch_silence(answers)
         evidence = min(self.failure_window, 50)
         if (
             self.max_failure_rate > 0
@@ -361,6 +367,22 @@ class PAREVecEnv(VecEnvWrapper):
                 f"advisor {self.advisor.label}: {st.failure_rate:.0%} of the last "
                 f"{len(self._failures)} answers failed (pare.max_failure_rate "
                 f"{self.max_failure_rate:g}); last error: {last}"
+            )
+
+    def _watch_silence(self, answers: list[Answer]) -> None:
+        """A teacher that accepts requests but answers none of them: whole batches that end at
+        the deadline. After SILENT_BATCHES such batches in a row training stops (resumable) at
+        once, without waiting for a window of answers that would take many deadlines."""
+        if not answers or self.max_failure_rate <= 0:
+            return
+        if all((a.error or "").startswith(NO_ANSWER) for a in answers):
+            self._silent += 1
+        else:
+            self._silent = 0
+        if self._silent >= SILENT_BATCHES:
+            raise AdvisorFailing(
+                f"advisor {self.advisor.label} answered none of its last {self._silent} "
+                f"batches by their deadline; last error: {answers[-1].error}"
             )
 
     def _submit(self, worlds: np.ndarray) -> None:
