@@ -391,6 +391,33 @@ def test_runner_evaluates_the_physics_simulator() -> None:
     assert records[0]["steps"] <= 10 and "sim_seconds" in records[0]
 
 
+def test_report_puts_physics_beside_grid_and_explains_a_gap_by_counted_events() -> None:
+    from pirl.evaluate.physics_report import physics_gap_table
+    from pirl.evaluate.runner import run_chunk, spec_for_builtin
+
+    spec = spec_for_builtin("boustrophedon")
+    env = VCPPConfig(max_steps=5, scale_by_alpha=False).to_dict()
+    grid = run_chunk(spec, env, {}, (10, 10, 3), "grid", [0, 1])
+    flights = run_chunk(spec, env, {}, (10, 10, 3), "physics", [0, 1])
+    assert [f["end"] for f in flights] == ["step_limit"] * 2  # 5 steps do not cover 10x10
+    table = physics_gap_table(grid + flights)
+    row = next(line for line in table.splitlines() if line.startswith("| boustrophedon"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    vcr_grid = np.mean([g["vcr"] for g in grid])
+    vcr_physics = np.mean([f["vcr"] for f in flights])
+    assert cells[5:7] == [f"{vcr_grid:.2f}", f"{vcr_physics:.2f}"]
+    assert cells[8] == "step_limit 2"
+    # The episode: an empty battery after 59 steps, 4 timeouts taking most of it.
+    bad = [
+        {**f, "vcr": f["vcr"] - 0.3, "end": "battery", "timeouts": 4, "energy_timeout": 300.0}
+        for f in flights
+    ]
+    why = physics_gap_table(grid + bad).splitlines()[-1].split("|")[-2]
+    assert "battery 2 in physics against step_limit 2 on the grid" in why
+    assert "4.0 timeouts" in why and "of the battery" in why
+    assert physics_gap_table(grid) == ""  # no physics episodes, no section
+
+
 # -- Webots: world generator, controller arguments, pilot (no Webots needed) ----------------
 
 

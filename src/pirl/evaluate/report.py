@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary
 
 # The paper's results (DESIGN.md section 1): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
@@ -478,6 +479,7 @@ def write_report(
             advice_table(advisor_stats),
             improvement,
             camera,
+            physics_gap_table(records),
             "## Secondary: spread over episodes",
             "",
             *spread,
