@@ -1,28 +1,32 @@
 """Physics backend throughput: simulated seconds per wall second and episodes per minute.
 
 Flies whole episodes of the PyFlyt backend (``pirl evaluate --sim physics``) at 30x30x3 with a
-planner (boustrophedon) and/or random actions, one process, and prints per policy the steps,
+planner (boustrophedon), random actions and/or trained runs (a run folder, acting
+stochastic), one process, and prints per policy the steps,
 simulated seconds and wall seconds per episode, the real-time factor (simulated seconds per
 wall second) and episodes per minute. PyFlyt's one-off numba compilation is paid by a warm-up
 flight first and reported apart. CPU time is printed too: on a shared machine the wall time
 depends on the neighbours. Usage::
 
-    python benchmarks/physics_throughput.py [--episodes 3] [--policy boustrophedon random]
+    python benchmarks/physics_throughput.py [--episodes 3] [--policy boustrophedon random RUN]
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-from pirl.agents.boustrophedon import BoustrophedonPolicy
+from pirl.agents.loading import load_policy
 from pirl.agents.policy import Policy, RandomPolicy
+from pirl.evaluate.scenarios import scenario_seeds
 from pirl.physics import PhysicsConfig, run_physics_episode
 from pirl.world.config import VCPPConfig
 
 
 def make_policy(name: str, seed: int) -> Policy:
-    return BoustrophedonPolicy() if name == "boustrophedon" else RandomPolicy(seed)
+    """A built-in by name or a trained run folder (acting stochastic, as the demo does)."""
+    return load_policy(name, seed=seed, act="stochastic")
 
 
 def main() -> None:
@@ -30,7 +34,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3, help="episodes per policy")
     parser.add_argument("--size", type=int, nargs=3, default=(30, 30, 3))
     parser.add_argument(
-        "--policy", nargs="+", default=["boustrophedon", "random"], help="boustrophedon, random"
+        "--policy",
+        nargs="+",
+        default=["boustrophedon", "random"],
+        help="boustrophedon, random or a run folder",
     )
     args = parser.parse_args()
     physics = PhysicsConfig()
@@ -53,9 +60,10 @@ def main() -> None:
     )
     for name in args.policy:
         steps = sim = wall = cpu = vcr = battery = timeouts = 0.0
-        for seed in range(args.episodes):
+        for seed in scenario_seeds(size, args.episodes):  # the evaluation's scenarios
+            policy = make_policy(name, seed)
             w0, c0 = time.perf_counter(), time.process_time()
-            m = run_physics_episode(cfg, make_policy(name, seed), seed, physics)
+            m = run_physics_episode(cfg, policy, seed, physics)
             wall += time.perf_counter() - w0
             cpu += time.process_time() - c0
             steps += m["steps"]
@@ -65,7 +73,8 @@ def main() -> None:
             timeouts += m["timeouts"]
         n = args.episodes
         print(
-            f"{name:>13} {steps / n:>6.0f} {sim / n:>7.1f} {wall / n:>7.1f} {cpu / n:>6.1f}"
+            f"{Path(name).name[:13]:>13} {steps / n:>6.0f} {sim / n:>7.1f} {wall / n:>7.1f}"
+            f" {cpu / n:>6.1f}"
             f" {sim / wall:>12.1f} {60 * n / wall:>12.2f} {vcr / n:>5.2f} {battery / n:>7.2f}"
             f" {timeouts / n:>8.1f}"
         )
