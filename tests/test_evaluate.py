@@ -192,3 +192,22 @@ def test_seeds_are_the_unit_on_a_hand_made_table():
     x, y = np.array([[0.9], [0.8], [0.85]]), np.array([[0.5], [0.6], [0.4]])
     assert probability_of_improvement(x, y)[0] == pytest.approx(1.0)
     assert probability_of_improvement(y, y)[0] == pytest.approx(0.5)
+
+
+def test_camera_table_gives_steps_relative_to_the_planner():
+    from pirl.evaluate.report import camera_table
+
+    def row(method: str, label: str, steps: float, vcr: float) -> dict:
+        return {
+            "sim": "grid", "method": method, "label": label, "act": "greedy", "size": "30x30x3",
+            "vcr_iqm": vcr, "vcr_iqm_lo": vcr, "vcr_iqm_hi": vcr, "vcr_mean": vcr,
+            "steps_mean": steps,
+        }  # fmt: skip
+
+    table = camera_table(
+        [row("boustrophedon", "planner", 200.0, 1.0), row("ppo-ewri", "PPO-EWRI", 300.0, 0.9)]
+    )
+    assert "steps / planner's" in table
+    ewri = next(line for line in table.splitlines() if line.startswith("| PPO-EWRI"))
+    cells = [c.strip() for c in ewri.strip("|").split("|")]
+    assert cells[-2] == "1.50" and cells[-1] == "0.30"

@@ -166,12 +166,18 @@ CAMERA = (
 
 def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
     """Camera use beside coverage: per method, size and act mode, the share of camera
-    actions, mean footprint, final tilt and zoom, steps, and VCR per step."""
+    actions, mean footprint, final tilt and zoom, steps, steps relative to the planner's on
+    the same scenarios (mean steps over mean planner steps), and VCR per 100 steps."""
+    from pirl.agents.boustrophedon import BoustrophedonPolicy
+
     sim_rows = [r for r in rows if r["sim"] == sim]
     if not sim_rows:
         return ""
+    planner = {
+        r["size"]: r.get("steps_mean") for r in sim_rows if r["method"] == BoustrophedonPolicy.name
+    }
     head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
-    head.append("VCR per 100 steps")
+    head += ["steps / planner's", "VCR per 100 steps"]
     lines = [
         f"### Camera use ({sim} simulator; means over episodes)",
         "",
@@ -189,6 +195,8 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
         cells = [r["label"], r.get("act", ""), r["size"], _cell(r, "vcr")]
         cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
         steps = r.get("steps_mean", math.nan)
+        ref = planner.get(r["size"])
+        cells.append(f"{steps / ref:.2f}" if ref and steps and steps > 0 else "—")
         cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
