@@ -66,6 +66,7 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=["masked", "masked-memory"],
                         choices=sorted(VARIANTS))  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--methods", nargs="+", default=None, help="default: the profile's")
     parser.add_argument("--steps", type=int, default=None, help="PPO steps (default: profile)")
     parser.add_argument("--sizes", nargs="+", default=["30", "45", "60"])
     parser.add_argument("--episodes", type=int, default=6, help="scenarios per size")
@@ -78,6 +79,8 @@ def main() -> None:
     if args.steps:
         base = base.with_overrides(train={"total_steps": args.steps})
     base = base.with_overrides(reproduce={"seeds": args.seeds})
+    if args.methods:
+        base = base.with_overrides(reproduce={"methods": args.methods})
     pick = validation_seeds if args.split == "validation" else scenario_seeds
     sizes = [parse_size(s) for s in args.sizes]
     planner = {}
