@@ -74,8 +74,10 @@ def _row(key: tuple, flights: list[dict[str, Any]], paired: list[tuple[dict, dic
     energy = {c: sum(float(f.get(f"energy_{c}", 0.0)) for f in flights) for c in ENERGY_CAUSES}
     total = sum(energy.values())
     shares = {c: e / total for c, e in energy.items() if total > 0 and e > 0}
-    by_cause = ", ".join(
-        f"{c} {100 * s:.0f}%" for c, s in sorted(shares.items(), key=lambda kv: -kv[1])
+    by_cause = ", ".join(  # causes under half a percent would only print as 0%
+        f"{c} {100 * s:.0f}%"
+        for c, s in sorted(shares.items(), key=lambda kv: -kv[1])
+        if s >= 0.005
     )
     end_text = ", ".join(f"{k} {v}" for k, v in sorted(ends.items()))
     if paired:
