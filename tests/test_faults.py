@@ -347,3 +347,152 @@ def test_a_teacher_that_stops_answering_stops_training_resumably(tmp_path, fake)
     proc = _pirl("train", "--method", "pirl", "--out", str(run), "--resume", cwd=tmp_path,
                  env=_env(tmp_path))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
+
+
+# -- 5. any path: spaces, commas, non-ASCII ---------------------------------------------------
+def test_paths_with_spaces_commas_and_non_ascii_end_to_end(tmp_path):
+    env = _env(tmp_path)
+    run = tmp_path / "my run, ü"
+    proc = _pirl("train", "--method", "ppo-sr", "--config", "test", "--out", str(run),
+                 cwd=tmp_path, env=env)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    results = tmp_path / "résultats, 1"
+    proc = _pirl("evaluate", "--runs", str(run), "--methods", "boustrophedon", "--sizes", "16",
+                 "--episodes", "1", "--act", "greedy", "--out", str(results), cwd=tmp_path,
+                 env=env)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert (results / "summary.csv").is_file()
+    student = tmp_path / "élève, 1"
+    proc = _pirl("distill", "--teacher", "oracle", "--states", "40", "--fit-steps", "20",
+                 "--policy", str(run), "--policy", "boustrophedon", "--config", "test",
+                 "--out", str(student), cwd=tmp_path, env=env)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    record = json.loads((student / "student.json").read_text())
+    assert record["policies"] == [str(run), "boustrophedon"]
+
+
+# -- 6. checks before folders; OS errors and Ctrl-C in one line ------------------------------
+def test_impossible_obstacle_layout_is_refused_before_any_folder(tmp_path):
+    cfg = _config(tmp_path, env={"size": [3, 3, 3], "obstacles_min": 30, "obstacles_max": 30,
+                                 "radius_min": 2.0, "radius_max": 2.0})  # fmt: skip
+    run = tmp_path / "run"
+    proc = _pirl("train", "--method", "ppo-sr", "--config", str(cfg), "--out", str(run),
+                 cwd=tmp_path, env=_env(tmp_path))  # fmt: skip
+    assert "could not place" in _error_line(proc) and not run.exists()
+    proc = _pirl("evaluate", "--methods", "random", "--config", str(cfg), "--sizes", "3x3x3",
+                 "--episodes", "1", "--out", str(tmp_path / "ev"), cwd=tmp_path,
+                 env=_env(tmp_path))  # fmt: skip
+    assert "could not place" in _error_line(proc) and not (tmp_path / "ev").exists()
+
+
+def test_os_errors_are_one_line_naming_the_path(tmp_path):
+    env = _env(tmp_path)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    proc = _pirl("train", "--method", "ppo-sr", "--config", "test", "--out",
+                 str(blocker / "run"), cwd=tmp_path, env=env)  # fmt: skip
+    assert str(blocker / "run") in _error_line(proc)
+    with _tmpfs(tmp_path / "ro", "ro,size=64k") as mounted:
+        if mounted:
+            proc = _pirl("train", "--method", "ppo-sr", "--config", "test", "--out",
+                         str(tmp_path / "ro" / "run"), cwd=tmp_path, env=env)  # fmt: skip
+            line = _error_line(proc)
+            assert "Read-only file system" in line and str(tmp_path / "ro" / "run") in line
+    with _tmpfs(tmp_path / "full", "size=96k") as mounted:
+        if not mounted:
+            pytest.skip("cannot mount a small tmpfs here")
+        proc = _pirl("train", "--method", "ppo-sr", "--config", "test", "--out",
+                     str(tmp_path / "full" / "run"), cwd=tmp_path, env=env)  # fmt: skip
+        line = _error_line(proc)
+        assert "No space left on device" in line and str(tmp_path / "full" / "run") in line
+
+
+def _interrupt(args: list[str], tmp_path: Path, ready: Path) -> subprocess.CompletedProcess:
+    """Start ``pirl args`` in a session of its own, wait for ``ready`` to exist, then Ctrl-C
+    the whole process group as a terminal does."""
+    proc = subprocess.Popen(
+        [*PIRL, *args], cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        # A shell that starts the suite in the background ignores SIGINT; children inherit it.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+    deadline = time.monotonic() + 240
+    while not ready.exists():
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.2)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def test_ctrl_c_in_reproduce_and_evaluate_is_one_line(tmp_path):
+    cfg = _config(tmp_path, train={"total_steps": 200_000, "checkpoint_every": 128},
+                  reproduce={"train_workers": 2, "methods": ["ppo-sr", "ppo-ewri"]})  # fmt: skip
+    out = tmp_path / "res"
+    proc = _interrupt(["reproduce", "--config", str(cfg), "--out", str(out)], tmp_path,
+                      out / "runs" / "ppo-sr-s0" / "checkpoints" / "LATEST")  # fmt: skip
+    line = _error_line(proc, 130)
+    assert line.startswith("interrupted:") and "run the same command to resume" in line
+    assert f"pirl reproduce --config {cfg} --out {out}" in line
+    proc = _interrupt(["evaluate", "--methods", "random", "--sizes", "60", "--episodes", "400",
+                       "--workers", "2", "--out", str(tmp_path / "ev")], tmp_path,
+                      tmp_path / "ev" / ".pirl.lock")  # fmt: skip
+    line = _error_line(proc, 130)
+    assert line.startswith("interrupted:") and "run the same command" in line
+
+
+# -- 7. the small ones -----------------------------------------------------------------------
+def test_small_surprises_are_said(tmp_path):
+    env = _env(tmp_path)
+    ev = tmp_path / "ev"
+    args = ["evaluate", "--methods", "boustrophedon", "--sizes", "16", "--episodes", "1",
+            "--act", "greedy", "--out", str(ev)]  # fmt: skip
+    assert _pirl(*args, cwd=tmp_path, env=env).returncode == 0
+    before = (ev / "summary.csv").read_bytes()
+    assert "--overwrite" in _error_line(_pirl(*args, cwd=tmp_path, env=env))
+    assert (ev / "summary.csv").read_bytes() == before
+    assert _pirl(*args, "--overwrite", cwd=tmp_path, env=env).returncode == 0
+    for workers in ("0", "-2"):
+        proc = _pirl(*args, "--overwrite", "--workers", workers, cwd=tmp_path, env=env)
+        assert "--workers" in _error_line(proc)
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("")
+    proc = _pirl("train", "--method", "ppo-sr", "--config", str(empty), "--out",
+                 str(tmp_path / "run"), cwd=tmp_path, env=env)  # fmt: skip
+    assert "is empty" in _error_line(proc) and not (tmp_path / "run").exists()
+
+
+def test_meta_steps_csv_line_endings_n_updates_and_the_differing_setting(tmp_path):
+    import shutil
+    import zipfile
+
+    from pirl.agents.config import RunConfig
+    from pirl.agents.train import train
+    from pirl.evaluate.runner import distinct_specs, spec_for_run
+    from pirl.world.config import ConfigError
+
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"total_steps": 1500})
+    run = tmp_path / "run"
+    train("ppo-sr", cfg, run, seed=0, show_progress=False)
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["total_steps"] == meta["timesteps"] == 1536  # whole rollouts of 128 steps
+    rows = (run / "episodes.csv").read_bytes().count(b"\n")
+    # Resumed and extended: one line ending throughout, SB3's update count carried on.
+    train("ppo-sr", cfg.with_overrides(train={"total_steps": 3072}), run, seed=0, resume=True,
+          show_progress=False)  # fmt: skip
+    data = (run / "episodes.csv").read_bytes()
+    assert data.count(b"\n") == data.count(b"\r\n") > rows > 1
+    n_epochs = cfg.ppo.n_epochs
+    with zipfile.ZipFile(run / "model.zip") as zf:  # SB3's saved attributes, any PPO class
+        saved = json.loads(zf.read("data"))
+    assert saved["_n_updates"] == 3072 // 128 * n_epochs
+    # Same label, same seed, another config: the refusal names the setting, not "copies".
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    text = (other / "config.yaml").read_text().replace("learning_rate: 0.0003",
+                                                       "learning_rate: 0.001")  # fmt: skip
+    (other / "config.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=r"ppo\.learning_rate") as info:
+        distinct_specs([spec_for_run(run), spec_for_run(other)])
+    assert "copies" not in str(info.value)

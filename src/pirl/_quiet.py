@@ -11,9 +11,12 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from types import ModuleType
 
 _WARNINGS = (
@@ -63,9 +66,27 @@ def import_quietly(name: str) -> ModuleType:
         return importlib.import_module(name)
 
 
+class QuietProcessPool(ProcessPoolExecutor):
+    """A ``ProcessPoolExecutor`` whose workers ignore Ctrl-C from their first instruction.
+
+    Workers are started with SIGINT ignored in the parent for that moment: an ignored signal
+    stays ignored across ``exec``, so a Ctrl-C that lands while a spawned worker is still
+    importing prints no traceback (an initializer runs too late for that). Ctrl-C is the
+    parent's to handle: it stops the workers and says in one line what was kept.
+    """
+
+    def _adjust_process_count(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            super()._adjust_process_count()  # type: ignore[misc]
+            return
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            super()._adjust_process_count()  # type: ignore[misc]
+        finally:
+            signal.signal(signal.SIGINT, old)
+
+
 def ignore_sigint() -> None:
     """In a worker process: leave Ctrl-C to the parent, which stops its workers and says in
     one line what was kept (instead of one ``KeyboardInterrupt`` traceback per worker)."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -51,17 +51,22 @@ def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
             raise typer.Exit(2) from None
         except OSError as exc:
             # A read-only or full disk, a folder without permission: the path and the cause.
-            err.print(f"[bold red]error:[/] {escape(os_error_line(exc))}", soft_wrap=True)
+            line = os_error_line(exc, kwargs.get("out"))
+            err.print(f"[bold red]error:[/] {escape(line)}", soft_wrap=True)
             raise typer.Exit(2) from None
 
     return wrapper
 
 
-def os_error_line(exc: OSError) -> str:
-    """``cannot write PATH: No space left on device (...)``: one line for an OS error."""
+def os_error_line(exc: OSError, out: Any = None) -> str:
+    """``PATH: No space left on device (what to do)``: one line for an OS error. A failed
+    write names no file (the OS does not say which); then the command's ``out`` is named."""
     import errno
 
-    path = exc.filename if exc.filename is not None else "(unknown path)"
+    if exc.filename is not None:
+        path = str(exc.filename)
+    else:
+        path = f"writing in {out}" if out is not None else "(unknown path)"
     reason = exc.strerror or type(exc).__name__
     hint = {
         errno.ENOSPC: "free some space, then run the same command again",
@@ -350,12 +355,16 @@ def train(
                 method, cfg, out, seed=seed, resume=resume, student=student if not resume else None
             )
     except TrainingInterrupted as stop:
-        err.print(f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume")
+        err.print(
+            f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume",
+            soft_wrap=True,
+        )
         raise typer.Exit(130) from None
     except TrainingStopped as stop:
         err.print(
             f"[bold red]stopped:[/] {escape(stop.reason)}; checkpoint: {stop.checkpoint}; "
-            "fix the advisor, then continue with --resume"
+            "fix the advisor, then continue with --resume",
+            soft_wrap=True,  # one line whatever the width: logs and tests read it whole
         )
         raise typer.Exit(3) from None
     console.print(f"done: {result}")

@@ -35,6 +35,7 @@ def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None)
     world, core = venv.world, venv.core
     state: dict[str, Any] = {
         "num_timesteps": int(model.num_timesteps),
+        "n_updates": int(model._n_updates),  # SB3 logs train/n_updates from it
         "policy": {k: v.detach().clone() for k, v in model.policy.state_dict().items()},
         "optimizer": copy.deepcopy(model.policy.optimizer.state_dict()),
         "last_obs": np.copy(model._last_obs),
@@ -64,6 +65,7 @@ def restore(
     model.policy.load_state_dict(state["policy"])
     model.policy.optimizer.load_state_dict(state["optimizer"])
     model.num_timesteps = state["num_timesteps"]
+    model._n_updates = int(state.get("n_updates", 0))  # older checkpoints lack it
     model._last_obs = state["last_obs"]
     model._last_episode_starts = state["last_episode_starts"]
     model.ep_info_buffer = None  # rebuilt by learn(); refilled below

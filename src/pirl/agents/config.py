@@ -263,9 +263,15 @@ class RunConfig:
         if not path.is_file():
             raise ConfigError(f"config file not found: {path}")
         try:
-            data = yaml.safe_load(path.read_text()) or {}
+            data = yaml.safe_load(path.read_text())
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+        if data is None:
+            # An empty file would silently train on built-in defaults that match no preset.
+            raise ConfigError(
+                f"{path} is empty; give settings (or {{}} for the built-in defaults), or a "
+                "preset such as quick or test"
+            )
         return cls.from_dict(data)
 
     def to_dict(self) -> dict[str, Any]:

@@ -108,7 +108,8 @@ def check_resume(out: Path, method: str, cfg: RunConfig, seed: int, log: Any = p
             f"--resume: {out} was trained with {key}={old.get(key)!r}; this command gives "
             f"{key}={new.get(key)!r}{stop}"
         )
-    before, after = int(meta.get("total_steps") or 0), cfg.train.total_steps
+    # meta.json records the whole-rollout count that runs; compare like with like.
+    before, after = int(meta.get("total_steps") or 0), whole_steps(saved, cfg.train.total_steps)
     if after > before:
         log(f"resume: extending {out} from {before:,} to {after:,} steps")
     elif after < before:
@@ -321,11 +322,20 @@ class RunCallback(BaseCallback):
 
 
 def _truncate_csv(path: Path, rows: int) -> None:
-    """Drop episode rows written after the checkpoint being resumed."""
+    """Drop episode rows written after the checkpoint being resumed (line endings kept as
+    written: newline="" reads and writes them untouched)."""
     if not path.exists():
         return
-    lines = path.read_text().splitlines(keepends=True)
-    path.write_text("".join(lines[: rows + 1]))
+    with open(path, newline="") as fh:
+        lines = fh.read().splitlines(keepends=True)
+    with open(path, "w", newline="") as fh:
+        fh.write("".join(lines[: rows + 1]))
+
+
+def whole_steps(cfg: RunConfig, steps: int) -> int:
+    """``steps`` rounded up to whole rollouts (n_envs x n_steps): the steps PPO really runs."""
+    rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
+    return -(-steps // rollout) * rollout
 
 
 class Progress:
@@ -451,7 +461,7 @@ def train(
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
         "complete": False,
-        "total_steps": cfg.train.total_steps,
+        "total_steps": whole_steps(cfg, cfg.train.total_steps),  # the steps that run
     }
     if student is not None:
         meta["student_from"] = str(student)

@@ -15,10 +15,11 @@ import os
 import shutil
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from pirl import _quiet
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import (
@@ -207,7 +208,7 @@ def _train_parallel(
     failure: BaseException | None = None
     log(f"training {len(todo)} runs in {workers} worker processes (1 torch + 1 numba thread each)")
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init) as pool:
+    with _quiet.QuietProcessPool(workers, mp_context=ctx, initializer=_worker_init) as pool:
         futures: dict[Future, PlannedRun] = {}
 
         def submit(item: tuple[PlannedRun, Path, bool]) -> None:

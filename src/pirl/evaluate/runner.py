@@ -391,7 +391,7 @@ def _config_difference(a: Path, b: Path, method: str) -> tuple[str, Any, Any] | 
 def process_pool(workers: int) -> ProcessPoolExecutor:
     # spawn: workers must not inherit the parent's threads (torch, an LLM, numba).
     # ignore_sigint: Ctrl-C is the parent's to handle (one line, no worker tracebacks).
-    return ProcessPoolExecutor(
+    return _quiet.QuietProcessPool(
         max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_quiet.ignore_sigint
     )
 
