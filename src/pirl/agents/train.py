@@ -33,7 +33,13 @@ from stable_baselines3.common.vec_env import VecMonitor
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import LABELS
-from pirl.agents.run_folder import git_commit, prepare_run_folder, train_seed_base, write_json
+from pirl.agents.run_folder import (
+    git_commit,
+    prepare_run_folder,
+    release_folder,
+    train_seed_base,
+    write_json,
+)
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.wrapper import AdvisorFailing
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
@@ -491,6 +497,7 @@ def train(
         progress.close()
         saved = callback.save_snapshot()
         stack.env.close()
+        release_folder(out)  # the caller may resume it, in this process or another
         raise TrainingInterrupted(saved) from None
     except AdvisorFailing as failing:
         progress.close()
@@ -498,6 +505,7 @@ def train(
         if stack.pare is not None:
             write_json(out / "advisor_stats.json", _advisor_stats(stack.pare, advisor))
         stack.env.close()
+        release_folder(out)
         raise TrainingStopped(str(failing), saved) from None
     progress.close()
     final = out / "model.zip"
@@ -516,8 +524,6 @@ def train(
     meta.update(complete=True, timesteps=int(model.num_timesteps))
     write_json(out / "meta.json", meta)
     stack.env.close()
-    from pirl.agents.run_folder import release_folder
-
     release_folder(out)
     return final
 
