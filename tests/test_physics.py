@@ -379,6 +379,7 @@ def test_a_drone_wedged_under_a_sphere_is_put_back_and_charged_a_real_drones_pow
         _step(mission, flight, 1)  # and it flies on
     m = mission.metrics()
     assert m["timeouts"] == 1 and mission.world.position(0) == (1, 4, 1)
+    assert sum(_causes(m).values()) == pytest.approx(m["energy_used"], rel=1e-12)
 
 
 def test_runner_evaluates_the_physics_simulator() -> None:
