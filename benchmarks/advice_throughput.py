@@ -10,19 +10,29 @@ Prints, in one run:
 
 Usage: ``python benchmarks/advice_throughput.py [--envs 16] [--threads 1] [--seconds 20]``.
 The sync cases run a fixed number of steps (fewer for small K, since each waits for the LLM).
+
+``--prefix-reuse`` measures instead the embedded teacher's answers per second with and
+without the reuse of the shared prompt prefix's key/value cache (``LocalAdvisor
+(prefix_reuse=...)``), in one run, alternating the two on the same prompts (states of
+training rollouts, batches of ``--batch``): first on one core alone, then beside
+``--workers`` PPO training processes (the demo's conditions). It prints parse rate and answer
+distribution of both and ends with ``prefix reuse: A answers/s, without: B answers/s,
+speed-up C.Cx`` (the figures beside the workers when there are any).
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing as mp
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from pirl.advice.cache import CachedAdvisor
-from pirl.advice.local import LocalAdvisor
+from pirl.advice.local import LocalAdvisor, _common_length
 from pirl.advice.prompt import build_prompt
 from pirl.advice.state import prompt_state
 from pirl.env import make_vec_env
@@ -85,12 +95,141 @@ def pare_case(advisor, envs: int, mode: str, k: int, steps: int | None, seconds:
     }
 
 
+def rollout_prompts(n: int, variant: str, seed: int = 7) -> list[str]:
+    """Prompts about ``n`` states met along random rollouts of the training world (distinct
+    positions, cameras, batteries and obstacles, as the teacher queue samples them)."""
+    venv = make_vec_env(n, seed=seed, **SETTINGS)
+    venv.reset()
+    rng = np.random.default_rng(seed)
+    for _ in range(int(rng.integers(5, 40))):
+        venv.step(rng.integers(0, 12, n))
+    return [build_prompt(prompt_state(venv.world, e), variant) for e in range(n)]
+
+
+def _train_forever(out: str, seed: int) -> None:
+    """A PPO-EWRI training worker at the quick profile's settings (one torch thread), as
+    ``pirl reproduce`` runs two beside the teacher."""
+    import torch
+
+    from pirl.agents.config import RunConfig
+    from pirl.agents.train import train
+
+    torch.set_num_threads(1)
+    root = Path(__file__).resolve().parents[1]
+    cfg = RunConfig.from_yaml(root / "configs" / "quick.yaml")
+    cfg = cfg.with_overrides(train={"total_steps": 50_000_000, "checkpoint_every": 10**9})
+    train("ppo-ewri", cfg, Path(out) / f"w{seed}", seed=seed, show_progress=False)
+
+
+def prefix_rates(llm: LocalAdvisor, prompts: list[str], batch: int, rounds: int) -> dict:
+    """Answers/s with and without prefix reuse, alternating per batch on the same prompts."""
+    modes = {
+        "with": llm.with_settings(batch_size=batch),
+        "without": llm.with_settings(batch_size=batch),
+    }
+    modes["with"].prefix_reuse, modes["without"].prefix_reuse = True, False
+    seconds = dict.fromkeys(modes, 0.0)
+    answers: dict[str, list] = {m: [] for m in modes}
+    for r in range(rounds):
+        for start in range(0, len(prompts), batch):
+            chunk = prompts[start : start + batch]
+            order = ("with", "without") if (r + start // batch) % 2 == 0 else ("without", "with")
+            for mode in order:  # alternate which goes first: the load drifts
+                t = time.perf_counter()
+                answers[mode] += modes[mode].advise(chunk)
+                seconds[mode] += time.perf_counter() - t
+    out = {}
+    for mode, got in answers.items():
+        parsed = [a for a in got if a.recommendation is not None]
+        out[mode] = {
+            "rate": len(got) / seconds[mode],
+            "parse": len(parsed) / len(got),
+            "answers": Counter(a.text for a in got),
+            "texts": [a.text for a in got],
+        }
+    same = sum(a == b for a, b in zip(out["with"]["texts"], out["without"]["texts"], strict=True))
+    out["same"] = same / len(out["with"]["texts"])
+    return out
+
+
+def _print_prefix(title: str, r: dict, n_prompt: int) -> None:
+    print(f"\n{title}")
+    for mode in ("with", "without"):
+        m = r[mode]
+        top = ", ".join(f"{n}x '{t}'" for t, n in m["answers"].most_common(3))
+        print(
+            f"  {mode:<7} prefix reuse: {m['rate']:.2f} answers/s, parse rate {m['parse']:.0%}, "
+            f"{len(m['answers'])} distinct answers; most frequent: {top}"
+        )
+    print(f"  same answer text with and without: {r['same']:.0%} of {n_prompt} prompts")
+
+
+def prefix_main(args: argparse.Namespace) -> None:
+    llm = LocalAdvisor(num_threads=args.threads, batch_size=args.batch)
+    rows: list[tuple[str, dict]] = []
+    for variant in args.variants:
+        prompts = rollout_prompts(args.prompts, variant)
+        ids = [llm.tokenizer(llm.chat_text(p), add_special_tokens=False)["input_ids"]
+               for p in prompts]  # fmt: skip
+        tokens, shared = [len(i) for i in ids], _common_length(ids)
+        llm.advise(prompts[: args.batch])  # warm-up: first calls are slower
+        r = prefix_rates(llm, prompts, args.batch, args.rounds)
+        _print_prefix(
+            f"{variant} prompt, {len(prompts)} states x {args.rounds} rounds, batches of "
+            f"{args.batch}, one core alone ({np.mean(tokens):.0f} tokens per prompt, "
+            f"{shared} shared)",
+            r,
+            len(r["with"]["texts"]),
+        )
+        rows.append((f"{variant}, alone", r))
+    if args.workers:
+        ctx = mp.get_context("spawn")
+        with tempfile.TemporaryDirectory() as tmp:
+            procs = [
+                ctx.Process(target=_train_forever, args=(tmp, s), daemon=True)
+                for s in range(args.workers)
+            ]
+            for p in procs:
+                p.start()
+            time.sleep(args.warmup)  # imports and numba compilation, then steady training
+            try:
+                prompts = rollout_prompts(args.prompts, args.variants[0])
+                r = prefix_rates(llm, prompts, args.batch, args.rounds)
+                _print_prefix(
+                    f"{args.variants[0]} prompt beside {args.workers} PPO training workers",
+                    r,
+                    len(r["with"]["texts"]),
+                )
+                rows.append((f"{args.variants[0]}, beside {args.workers} workers", r))
+            finally:
+                for p in procs:
+                    p.terminate()
+                for p in procs:
+                    p.join(10)
+    name, last = rows[-1]
+    a, b = last["with"]["rate"], last["without"]["rate"]
+    print(f"({name})")
+    print(f"prefix reuse: {a:.2f} answers/s, without: {b:.2f} answers/s, speed-up {a / b:.1f}x")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", type=int, default=16)
     parser.add_argument("--threads", type=int, default=1, help="LLM CPU threads")
     parser.add_argument("--seconds", type=float, default=20.0, help="async case duration")
+    parser.add_argument("--prefix-reuse", action="store_true", help="measure prefix reuse")
+    parser.add_argument("--prompts", type=int, default=32, help="--prefix-reuse: states")
+    parser.add_argument("--batch", type=int, default=16, help="--prefix-reuse: batch size")
+    parser.add_argument("--rounds", type=int, default=1, help="--prefix-reuse: passes")
+    parser.add_argument("--workers", type=int, default=2, help="--prefix-reuse: PPO workers")
+    parser.add_argument("--warmup", type=float, default=25.0, help="s before measuring")
+    parser.add_argument(
+        "--variants", nargs="+", default=["compact", "paper"], help="--prefix-reuse: prompts"
+    )
     args = parser.parse_args()
+    if args.prefix_reuse:
+        prefix_main(args)
+        return
     llm = LocalAdvisor(num_threads=args.threads, batch_size=32)
     for batch in (8, 32):
         single, batched = llm_rates(llm, batch)

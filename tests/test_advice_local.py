@@ -20,11 +20,13 @@ import pytest
 from pirl.advice import Answer, CachedAdvisor, PromptState, build_prompt
 from pirl.advice.local import (
     MARKER,
+    MAX_PREFIXES,
     LocalAdvisor,
     build_folder,
     embedded_gguf_path,
     resolve_model_dir,
 )
+from pirl.advice.prompt import STATE_MARKER
 
 torch = pytest.importorskip("torch")
 
@@ -216,3 +218,25 @@ def test_folder_build_failure_leaves_nothing(tmp_path: Path) -> None:
     with pytest.raises(RuntimeError, match="disk full"):
         build_folder(tmp_path / "m", broken)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_prefix_reuse_gives_the_answers_of_a_whole_prefill() -> None:
+    # float32, so that rounding cannot flip a greedy choice: the same answers, token for
+    # token, with the shared prefix's key/value cache kept and without it.
+    reuse = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    whole = reuse.with_settings()
+    whole.prefix_reuse = False
+    states = varied_states(10, seed=5)  # four sizes, both footprints: several prefixes
+    prompts = [build_prompt(s, v) for s, v in zip(states, ["compact", "paper"] * 5, strict=True)]
+    prompts.append("Reply with a camera setting.")  # no state marker: decoded whole
+    first = reuse.advise(prompts[:6])
+    again = reuse.advise(prompts)  # kept prefixes serve the second call
+    expected = whole.advise(prompts)
+    assert [a.text for a in again] == [a.text for a in expected]
+    assert [a.text for a in first] == [a.text for a in expected[:6]]
+    assert all(a.recommendation is not None for a in again)
+    heads = list(reuse._prefixes)
+    assert heads and all(h.endswith(STATE_MARKER) for h in heads)
+    distinct = {p[: p.index(STATE_MARKER)] for p in prompts if STATE_MARKER in p}
+    assert len(heads) == min(len(distinct), MAX_PREFIXES)
+    assert not whole._prefixes

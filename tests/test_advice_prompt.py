@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pirl.advice import FORMAT_EXAMPLE, VARIANTS, PromptState, build_prompt, parse_recommendation
-from pirl.advice.prompt import paper_half_width
+from pirl.advice.prompt import PROMPT_VERSION, STATE_MARKER, paper_half_width, prompt_id
 
 STATE = PromptState(
     position=(14, 0, 2),
@@ -26,8 +27,8 @@ STATE = PromptState(
 
 def test_paper_prompt_has_every_item() -> None:
     text = build_prompt(STATE)
-    task, rest = text.split("[Environment]")
-    env, request = rest.split("[Request]")
+    rest, env = text.split("[Environment]")
+    task, request = rest.split("[Request]")
     assert "[Task]" in task and "ground" in task and "obstacles" in task and "battery" in task
     assert "[14, 0, 2]" in env  # position
     assert "[90, 640x480, 60, 90, 1.0]" in env  # [fov, resolution, tilt, pan, zoom]
@@ -40,8 +41,32 @@ def test_paper_prompt_has_every_item() -> None:
     for item in ("pan [-90, 90]", "tilt [0, 90]", "zoom [0.5, 2.0]", "-1, 0 or 1"):
         assert item in request
     assert request.rstrip().endswith(FORMAT_EXAMPLE)
-    # The order is task || environment || request.
-    assert text.index("[Task]") < text.index("[Environment]") < text.index("[Request]")
+    # The order is task || request || environment: the state comes last.
+    assert text.index("[Task]") < text.index("[Request]") < text.index("[Environment]")
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("footprint", ["paper", "frustum"])
+def test_the_state_comes_last_after_a_shared_prefix(variant: str, footprint: str) -> None:
+    # Two different states of one world configuration share everything up to the state: the
+    # task, the reply format, the view rule and the grid (local.py reuses its key/value cache).
+    a = dataclasses.replace(STATE, footprint=footprint)
+    b = dataclasses.replace(
+        a, position=(3, 7, 0), tilt=90, pan=-45, zoom=2.0, battery=0.9, coverage=0.1,
+        obstacles=((1.0, 2.0, 0.0, 1.0),),
+    )  # fmt: skip
+    ta, tb = build_prompt(a, variant), build_prompt(b, variant)
+    shared = len(os.path.commonprefix([ta, tb]))
+    marker = STATE_MARKER
+    assert shared >= ta.index(marker) and shared > 0.45 * len(ta)
+    head = ta[: ta.index(marker)]
+    for item in ("format", "floor(m*zoom" if footprint == "paper" else "2*atan", "15"):
+        assert item in head
+    assert "[14" not in head and "0.24" not in head  # no state before the marker
+
+
+def test_prompt_id_carries_the_text_version() -> None:
+    assert prompt_id("compact") == f"compact-v{PROMPT_VERSION}" and PROMPT_VERSION >= 2
 
 
 def test_compact_prompt_has_every_item() -> None:

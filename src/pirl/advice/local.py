@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.parser import parse_recommendation
+from pirl.advice.prompt import STATE_MARKER
 
 if TYPE_CHECKING:  # pragma: no cover
     import torch
@@ -52,6 +53,10 @@ MARKER = "pirl-converted.json"
 """File written last into a converted folder; its presence means the folder is complete."""
 PREFILL = "pan:"
 """Text the constrained answer starts with."""
+MIN_PREFIX = 16
+"""Fewest shared tokens worth keeping a prefix cache for."""
+MAX_PREFIXES = 8
+"""Prefix caches kept (one per world configuration and prompt variant in use)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -331,6 +336,29 @@ def _pick(logits: torch.Tensor, allowed: list[int], temperature: float, top_p: f
     return allowed[int(torch.multinomial(probs, 1))]
 
 
+@functools.lru_cache(maxsize=8)
+def _cache_argument(model_class: type) -> str:
+    """The forward argument that takes a key/value cache: ``cache`` in transformers >= 5.2x,
+    ``past_key_values`` before (now deprecated)."""
+    import inspect
+
+    return (
+        "cache"
+        if "cache" in inspect.signature(model_class.forward).parameters
+        else ("past_key_values")
+    )
+
+
+def _past(lm: Any, cache: Any) -> dict[str, Any]:
+    return {_cache_argument(type(lm)): cache}
+
+
+def _cache_of(out: Any) -> Any:
+    """The key/value cache of a model output, under either name."""
+    # Not .get(): reading the old name eagerly raises a deprecation warning.
+    return out["cache"] if "cache" in out else out.past_key_values  # noqa: SIM401
+
+
 @torch_inference_mode
 def _grammar_decode(
     lm: Any,
@@ -340,6 +368,8 @@ def _grammar_decode(
     pad_id: int,
     temperature: float = 0.0,
     top_p: float = 1.0,
+    past: Any = None,
+    past_len: int = 0,
 ) -> list[list[int]]:
     """Decode a left-padded batch under ``grammar``; returns each row's answer tokens.
 
@@ -347,20 +377,28 @@ def _grammar_decode(
     names, separators) are appended without one and fed together with the chosen token in the
     next call. Rows that advance by fewer tokens in a call are padded inside that call (masked
     out), so every row's last position holds its newest real token.
+
+    ``past``: the key/value cache of a prefix of ``past_len`` tokens that every row shares,
+    already one row per prompt; ``input_ids`` then holds only what follows it (left-padded
+    after the prefix, masked, with positions counted on from ``past_len``).
     """
     import torch
 
     device = input_ids.device
     mask = attention_mask.to(torch.long)
-    positions = (mask.cumsum(-1) - 1).clamp(min=0)
+    positions = (mask.cumsum(-1) - 1).clamp(min=0) + past_len
+    if past_len:
+        shared = torch.ones((mask.shape[0], past_len), dtype=torch.long, device=device)
+        mask = torch.cat([shared, mask], dim=1)
     out = lm(
         input_ids=input_ids,
         attention_mask=mask,
         position_ids=positions,
+        **_past(lm, past),
         use_cache=True,
         logits_to_keep=1,
     )
-    cache = out.past_key_values
+    cache = _cache_of(out)
     logits = out.logits[:, -1, :]
     next_position = mask.sum(-1).tolist()
     rows = input_ids.shape[0]
@@ -407,11 +445,11 @@ def _grammar_decode(
             input_ids=step_ids.to(device),
             attention_mask=mask,
             position_ids=step_pos.to(device),
-            past_key_values=cache,
+            **_past(lm, cache),
             use_cache=True,
             logits_to_keep=1,
         )
-        cache = out.past_key_values
+        cache = _cache_of(out)
         logits = out.logits[:, -1, :]
     return generated
 
@@ -442,6 +480,12 @@ class LocalAdvisor(Advisor):
         top_p: nucleus sampling mass when sampling.
         system_prompt: system message; ``None`` keeps the chat template's default.
         prefill: text the free answer starts with (constrained answers always start ``pan:``).
+        prefix_reuse: constrained decoding: keep the key/value cache of each prompt's shared
+            part (chat template, task, format, rules, grid: everything before the state
+            marker, since PIRL's prompts put the state last), computed once alone, and compute
+            only the state and the answer per prompt, across prompts and batches. Answers are
+            the same up to floating-point rounding (as with another batch size), so it is not
+            part of :meth:`settings_key`.
     """
 
     name = "local"
@@ -461,6 +505,7 @@ class LocalAdvisor(Advisor):
         top_p: float = 1.0,
         system_prompt: str | None = None,
         prefill: str = PREFILL,
+        prefix_reuse: bool = True,
     ) -> None:
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
@@ -496,6 +541,9 @@ class LocalAdvisor(Advisor):
         self.lm.to(self.device)
         self.lm.eval()
         self.grammar = _Grammar(self.tokenizer) if self.constrained else None
+        self.prefix_reuse = bool(prefix_reuse)
+        # Shared prefixes (chat text up to the state marker) -> (token ids, key/value cache).
+        self._prefixes: dict[str, tuple[list[int], Any]] = {}
 
     def with_settings(self, **changes: Any) -> LocalAdvisor:
         """A copy sharing this one's loaded model, with other generation settings.
@@ -516,6 +564,7 @@ class LocalAdvisor(Advisor):
         if unknown:
             raise ValueError(f"unknown settings {sorted(unknown)}; allowed: {sorted(allowed)}")
         other = copy.copy(self)
+        other._prefixes = {}  # its own: another system prompt makes other prefixes
         for name, value in changes.items():
             setattr(other, name, value)
         if other.constrained:
@@ -572,7 +621,9 @@ class LocalAdvisor(Advisor):
                 texts, return_tensors="pt", padding=True, add_special_tokens=False
             ).to(self.device)
             prompt_tokens = batch["attention_mask"].sum(dim=1).tolist()
-            if self.grammar is not None:
+            if self.grammar is not None and self.prefix_reuse:
+                answers_tokens = self._decode_with_prefix(texts)
+            elif self.grammar is not None:
                 answers_tokens = _grammar_decode(
                     self.lm,
                     self.grammar,
@@ -602,6 +653,77 @@ class LocalAdvisor(Advisor):
             )
         return answers
 
+    def _prefix_of(self, text: str, ids: list[int]) -> tuple[str, list[int]] | None:
+        """The shared part of a chat text: everything up to the prompt's state marker
+        (:data:`~pirl.advice.prompt.STATE_MARKER`), with its tokens, when the text's own
+        tokens start with them (a prompt without the marker, or one whose tokens merge across
+        it, has none)."""
+        cut = text.find(STATE_MARKER)
+        if cut < 0:
+            return None
+        head = text[: cut + len(STATE_MARKER)]
+        kept = self._prefixes.get(head)
+        head_ids = kept[0] if kept is not None else None
+        if head_ids is None:
+            head_ids = self.tokenizer(head, add_special_tokens=False)["input_ids"]
+        if len(head_ids) < MIN_PREFIX or len(ids) <= len(head_ids):
+            return None
+        return (head, head_ids) if ids[: len(head_ids)] == head_ids else None
+
+    def _prefix_cache(self, head: str, head_ids: list[int], rows: int) -> Any:
+        """A private copy of ``head``'s key/value cache, one row per prompt (computed once,
+        alone, so an answer never depends on which prompts came before)."""
+        import torch
+
+        kept = self._prefixes.pop(head, None)
+        if kept is None:
+            out = self.lm(
+                input_ids=torch.tensor([head_ids], device=self.device),
+                use_cache=True,
+                logits_to_keep=1,
+            )
+            kept = (head_ids, _cache_of(out))
+        self._prefixes[head] = kept  # most recently used last
+        while len(self._prefixes) > MAX_PREFIXES:
+            self._prefixes.pop(next(iter(self._prefixes)))
+        cache = copy.deepcopy(kept[1])  # decoding appends to it; the kept one stays as it is
+        cache.batch_repeat_interleave(rows)
+        return cache
+
+    @torch_inference_mode
+    def _decode_with_prefix(self, texts: list[str]) -> list[list[int]]:
+        """Constrained decoding of ``texts``; rows that share a prefix (their text up to the
+        state marker) are decoded together from its kept key/value cache, the others whole."""
+        import torch
+
+        rows = self.tokenizer(texts, add_special_tokens=False)["input_ids"]
+        groups: dict[str | None, list[int]] = {}
+        heads: dict[str, list[int]] = {}
+        for i, (text, ids) in enumerate(zip(texts, rows, strict=True)):
+            found = self._prefix_of(text, ids)
+            if found is not None:
+                heads[found[0]] = found[1]
+            groups.setdefault(found[0] if found is not None else None, []).append(i)
+        pad = self.tokenizer.pad_token_id
+        out: list[list[int]] = [[] for _ in rows]
+        for head, members in groups.items():
+            start = len(heads[head]) if head is not None else 0
+            past = self._prefix_cache(head, heads[head], len(members)) if head else None
+            tails = [rows[i][start:] for i in members]
+            width = max(len(t) for t in tails)
+            ids = torch.full((len(members), width), pad, dtype=torch.long)
+            mask = torch.zeros((len(members), width), dtype=torch.long)
+            for k, tail in enumerate(tails):  # left-padded after the shared prefix, masked
+                ids[k, width - len(tail) :] = torch.tensor(tail)
+                mask[k, width - len(tail) :] = 1
+            answers = _grammar_decode(
+                self.lm, self.grammar, ids.to(self.device), mask.to(self.device), pad,
+                self.temperature, self.top_p, past=past, past_len=start,
+            )  # fmt: skip
+            for i, tokens in zip(members, answers, strict=True):
+                out[i] = tokens
+        return out
+
     def _free_decode(self, batch: Any) -> list[list[int]]:
         """Unconstrained ``generate``; each row's tokens up to its end token."""
         import torch
@@ -625,6 +747,16 @@ class LocalAdvisor(Advisor):
             f"LocalAdvisor(model={str(self.model_dir)!r}, device={self.device!r}, "
             f"constrained={self.constrained})"
         )
+
+
+def _common_length(rows: Sequence[Sequence[int]]) -> int:
+    """Length of the token prefix all ``rows`` share."""
+    first, n = rows[0], min(len(r) for r in rows)
+    for i in range(n):
+        token = first[i]
+        if any(r[i] != token for r in rows):
+            return i
+    return n
 
 
 def _as_list(value: int | Iterable[int] | None) -> list[int]:

@@ -1,13 +1,19 @@
-"""The structured zero-shot prompt: task || environment summary || request template.
+"""The structured zero-shot prompt: task, request template and rules first, the state last.
 
 The builder is deterministic and rounds every number (battery and coverage to ``decimals``,
 obstacle coordinates and radii to 1 decimal), so equal situations give byte-equal prompts and the
 advice cache can work. Two variants exist:
 
-- ``paper``: the paper's three parts in full sentences (DESIGN.md section 6).
+- ``paper``: the paper's three parts in full sentences (DESIGN.md section 6), the request
+  before the environment summary so that the state comes last.
 - ``compact``: the same items in terse form, for small local models: about 40% fewer tokens,
   and the format line shows each value's range instead of sample values (a 135M model copies
   sample values verbatim).
+
+Both variants put what is the same for every state of a world configuration first (task,
+reply format, view rule, grid) and the state last, so a local model can reuse the key/value
+cache of that shared prefix (:mod:`pirl.advice.local`). :data:`PROMPT_VERSION` changes with
+the text, and keys of stored answers (:func:`prompt_id`) carry it.
 """
 
 from __future__ import annotations
@@ -17,12 +23,34 @@ from dataclasses import dataclass
 
 from pirl.advice.recommendation import FORMAT_EXAMPLE, PAN_RANGE, TILT_RANGE, ZOOM_RANGE
 
-__all__ = ["VARIANTS", "FOOTPRINTS", "PromptState", "build_prompt", "paper_half_width"]
+__all__ = [
+    "FOOTPRINTS",
+    "PROMPT_VERSION",
+    "PromptState",
+    "STATE_MARKER",
+    "VARIANTS",
+    "build_prompt",
+    "paper_half_width",
+    "prompt_id",
+]
 
 VARIANTS: tuple[str, ...] = ("paper", "compact")
 """Prompt variants :func:`build_prompt` knows."""
 FOOTPRINTS: tuple[str, ...] = ("paper", "frustum")
 """Footprint models a prompt can describe."""
+STATE_MARKER = "State:\n"
+"""The line after which a prompt describes the state; everything before it is the same for
+every state of a world configuration."""
+PROMPT_VERSION = 2
+"""Version of the prompts' text (2: state last). Raise it whenever the text changes, so that
+answers to older prompts are never served as answers to these (:func:`prompt_id`)."""
+
+
+def prompt_id(variant: str) -> str:
+    """The variant and text version, e.g. ``"compact-v2"``: what a key of stored answers
+    (the teacher dataset) records about the prompt."""
+    return f"{variant}-v{PROMPT_VERSION}"
+
 
 COMPACT_TEMPLATE = (
     "pan: <-90..90>, tilt: <0..90>, zoom: <0.5..2.0>, X: <-1|0|1>, Y: <-1|0|1>, Z: <-1|0|1>"
@@ -111,37 +139,45 @@ def _obstacles(state: PromptState, compact: bool) -> str:
     return " ".join(items) if compact else "; ".join(items)
 
 
-def _view(state: PromptState, compact: bool) -> str:
-    """The view cone of the active footprint model, with its current value."""
+def _view_rule(state: PromptState, compact: bool) -> str:
+    """The view cone's rule for the active footprint model: the same for every state of a
+    world configuration, so it belongs to the shared part of the prompt."""
     if state.footprint == "paper":
-        h = paper_half_width(state.tilt, state.zoom)
-        side = 2 * h + 1
         if compact:
             return (
                 "ground square centered below the drone, half-width floor(m*zoom+0.5), "
-                f"m=2 if tilt<80 else 1 (now {side}x{side} cells)"
+                "m=2 if tilt<80 else 1"
             )
         return (
             "a square of ground cells centered below the drone, half-width floor(m*zoom+0.5) "
-            f"cells with m=2 if tilt < 80 else m=1 (now {side}x{side} cells); altitude and pan "
-            "do not change it."
+            "cells with m=2 if tilt < 80 else m=1; altitude and pan do not change it."
         )
-    altitude = int(state.position[2]) + 1
-    fov = math.degrees(2.0 * math.atan(math.tan(math.radians(state.fov_deg) / 2.0) / state.zoom))
     fov0 = _num(state.fov_deg, 0)
     reach = _num(state.max_range, 1)
     if compact:
         return (
-            f"pinhole camera {altitude} cells above ground, horizontal FOV "
-            f"2*atan(tan({fov0}/2)/zoom) (now {_num(fov, 0)} deg), aimed by tilt and pan, "
-            f"range {reach} cells"
+            f"pinhole camera z+1 cells above ground, horizontal FOV 2*atan(tan({fov0}/2)/zoom), "
+            f"aimed by tilt and pan, range {reach} cells"
         )
     return (
-        f"a pinhole camera at altitude z+1 = {altitude} cells, horizontal field of view "
-        f"2*atan(tan({fov0}/2)/zoom) degrees (now {_num(fov, 0)}; zooming in narrows it), aspect "
-        "4:3, pointed by tilt (below the horizon, 90 = straight down) and pan (heading, 0 = +x); "
-        f"it sees the ground cells inside its view up to {reach} cells away."
+        f"a pinhole camera at altitude z+1 cells, horizontal field of view "
+        f"2*atan(tan({fov0}/2)/zoom) degrees (zooming in narrows it), aspect 4:3, pointed by "
+        "tilt (below the horizon, 90 = straight down) and pan (heading, 0 = +x); it sees the "
+        f"ground cells inside its view up to {reach} cells away."
     )
+
+
+def _view_now(state: PromptState, compact: bool) -> str:
+    """The view cone's current value (state-dependent: it goes with the state)."""
+    if state.footprint == "paper":
+        h = paper_half_width(state.tilt, state.zoom)
+        side = 2 * h + 1
+        return f"{side}x{side} cells"
+    altitude = int(state.position[2]) + 1
+    fov = math.degrees(2.0 * math.atan(math.tan(math.radians(state.fov_deg) / 2.0) / state.zoom))
+    if compact:
+        return f"pinhole {altitude} cells above ground, FOV {_num(fov, 0)} deg"
+    return f"a pinhole camera {altitude} cells above the ground, field of view {_num(fov, 0)} deg"
 
 
 def _ranges() -> str:
@@ -176,33 +212,39 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
     )
     battery = _num(min(max(state.battery, 0.0), 1.0), decimals)
     coverage = _num(min(max(state.coverage, 0.0), 1.0), decimals)
+    # Everything before the state is the same for every state of a world configuration: an
+    # advisor that keeps the key/value cache of that prefix only reads the state (local.py).
     if compact:
         return (
             "Drone camera task: pick the next camera setting and one-cell move to see the most "
             "unseen ground, avoid obstacles and save battery.\n"
+            f"Reply in this format: {COMPACT_TEMPLATE}\n"
+            f"View rule: {_view_rule(state, compact=True)}\n"
             f"Grid {sx}x{sy}x{sz} (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1})\n"
+            f"{STATE_MARKER}"
             f"Position [x,y,z]: [{x},{y},{z}]\n"
             f"Camera [fov,resolution,tilt,pan,zoom]: {camera}\n"
             f"Battery {battery}, coverage {coverage}\n"
-            f"View: {_view(state, compact=True)}\n"
-            f"Obstacles [x,y,z,radius]: {_obstacles(state, compact=True)}\n"
-            f"Reply in this format: {COMPACT_TEMPLATE}"
+            f"View now: {_view_now(state, compact=True)}\n"
+            f"Obstacles [x,y,z,radius]: {_obstacles(state, compact=True)}"
         )
     return (
         "[Task]\n"
         "You control a drone whose gimbal camera can pan, tilt and zoom. Suggest its next move "
         "and camera setting to see as many ground cells as possible while avoiding obstacles, "
         "saving battery and not viewing cells again.\n"
+        "\n[Request]\n"
+        "Give a target pan, tilt and zoom, and a move of -1, 0 or 1 cell along X, Y and Z. "
+        f"Ranges: {_ranges()}.\n"
+        f"Reply with one line in exactly this format: {FORMAT_EXAMPLE}\n"
         "\n[Environment]\n"
+        f"View cone: {_view_rule(state, compact=False)}\n"
         f"Grid: {sx} x {sy} x {sz} cells (x 0-{sx - 1}, y 0-{sy - 1}, z 0-{sz - 1}; ground z=0)\n"
+        f"{STATE_MARKER}"
         f"Drone position [x, y, z]: [{x}, {y}, {z}]\n"
         f"Camera [field of view, resolution, tilt, pan, zoom]: {camera}\n"
         f"Battery: {battery} (1 full, 0 empty)\n"
         f"Coverage: {coverage} (share of ground cells seen)\n"
-        f"View cone: {_view(state, compact=False)}\n"
-        f"Obstacles (spheres, center [x, y, z] and radius): {_obstacles(state, compact=False)}\n"
-        "\n[Request]\n"
-        "Give a target pan, tilt and zoom, and a move of -1, 0 or 1 cell along X, Y and Z. "
-        f"Ranges: {_ranges()}.\n"
-        f"Reply with one line in exactly this format: {FORMAT_EXAMPLE}"
+        f"View cone now: {_view_now(state, compact=False)}\n"
+        f"Obstacles (spheres, center [x, y, z] and radius): {_obstacles(state, compact=False)}"
     )

@@ -41,6 +41,7 @@ import torch
 from torch import nn
 
 from pirl.advice.cache import open_store
+from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
@@ -92,10 +93,11 @@ def decode(labels: np.ndarray) -> np.ndarray:
 def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
     """Dataset key: the teacher and every setting that changes its answers or the features."""
     settings = advisor.settings_key() if hasattr(advisor, "settings_key") else ""
+    # prompt_id: the variant and its text version, so answers to an older text never mix in.
     parts = [
-        advisor.name, advisor.model, settings, prompt_variant, env_cfg.footprint, env_cfg.fov_deg,
-        env_cfg.max_range, env_cfg.occlusion, env_cfg.obs_window, env_cfg.obs_global,
-        FEATURE_VERSION,
+        advisor.name, advisor.model, settings, prompt_id(prompt_variant), env_cfg.footprint,
+        env_cfg.fov_deg, env_cfg.max_range, env_cfg.occlusion, env_cfg.obs_window,
+        env_cfg.obs_global, FEATURE_VERSION,
     ]  # fmt: skip
     # Optional observation blocks change the features; the default layout keeps its old keys.
     parts += [
