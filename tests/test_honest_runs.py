@@ -67,7 +67,11 @@ def test_a_starved_run_warns_and_is_labelled_unshaped_in_table_and_report(starve
     table = (tmp / "report" / "table.md").read_text()
     table_rows = [line for line in table.splitlines() if line.startswith("| PIRL (")]
     assert table_rows and all("unshaped 100%" in line for line in table_rows)
-    assert "unshaped 100%" in report.read_text()
+    page = report.read_text()
+    assert "unshaped 100%" in page
+    # The summary at the top says how much of the run was shaped, before any table.
+    assert page.index("Summary") < page.index("<table")
+    assert f"{run.name} 0%" in page and f"{run.name} 0%" in table.split("Headline act")[0]
 
 
 def test_a_row_is_labelled_when_any_of_its_runs_was_mostly_unshaped(tmp_path):

@@ -75,6 +75,13 @@ def test_report_renders_in_headless_chromium(reproduced, tmp_path):
     assert match, "the page's load script did not run"
     loaded, total = map(int, match.groups())
     assert total >= 8 and loaded == total
+    # Read at a glance: the rendered page opens with the generated summary, then the
+    # interval figure, then the tables.
+    first_h2 = re.search(r"<h2[^>]*>([^<]*)</h2>", dom)
+    assert first_h2 and first_h2.group(1) == "Summary"
+    summary = dom[dom.index("Summary") : dom.index("<h2", dom.index("Summary"))]
+    assert summary.count("<li>") >= 2 and "planner" in summary and "shaped" in summary
+    assert dom.index("Summary") < dom.index('alt="intervals') < dom.index("<table")
 
 
 def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced):

@@ -243,9 +243,10 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def improvement_table(records: list[dict[str, Any]], act: str) -> str:
-    """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
-    with the stratified bootstrap 95% interval (rliable)."""
+def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
+    """P(each PIRL variant improves on each other method) in VCR, runs (seeds) as the unit,
+    per sim and size, with its stratified bootstrap 95% interval (rliable): one dict per
+    comparison (``pirl``, ``other`` labels, ``sim``, ``size``, ``p``, ``lo``, ``hi``)."""
     from pirl.evaluate.summary import probability_of_improvement, seed_scores
 
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
@@ -261,35 +262,128 @@ def improvement_table(records: list[dict[str, Any]], act: str) -> str:
     labels = {m: honest_label(lab, sources.get(m, ())) for m, lab in labels.items()}
     pirls = sorted({m for m, _, _ in groups if m.startswith("pirl")}, key=_method_order)
     others = sorted({m for m, _, _ in groups if not m.startswith("pirl")}, key=_method_order)
-    if not pirls or not others:
+    keys = sorted(
+        {(s, z) for _, s, z in groups}, key=lambda k: (k[0], [int(v) for v in k[1].split("x")])
+    )
+    out = []
+    for pirl in pirls:
+        for sim, size in keys:
+            if (pirl, sim, size) not in groups:
+                continue
+            x = seed_scores(groups[(pirl, sim, size)], "vcr")
+            for other in others:
+                if (other, sim, size) not in groups:
+                    continue
+                y = seed_scores(groups[(other, sim, size)], "vcr")
+                p, lo, hi = probability_of_improvement(x, y)
+                out.append({"pirl": labels[pirl], "other": labels[other], "sim": sim,
+                            "size": size, "p": p, "lo": lo, "hi": hi})  # fmt: skip
+    return out
+
+
+def improvement_table(
+    records: list[dict[str, Any]], act: str, found: list[dict[str, Any]] | None = None
+) -> str:
+    """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
+    with the stratified bootstrap 95% interval (rliable). ``found``: :func:`improvements`,
+    when already computed."""
+    found = improvements(records, act) if found is None else found
+    if not found:
         return ""
+    others = list(dict.fromkeys(f["other"] for f in found))
     lines = [
         f"### Probability of improvement in VCR (act {act}; runs = training seeds)",
         "",
         "P(a run of the row's PIRL scores a higher mean VCR than a run of the column's "
         "method) [stratified bootstrap 95% interval]; 0.5 = no difference.",
         "",
-        "| PIRL | sim | size | " + " | ".join(labels[o] for o in others) + " |",
+        "| PIRL | sim | size | " + " | ".join(others) + " |",
         "|" + "---|" * (3 + len(others)),
     ]
-    keys = sorted(
-        {(s, z) for _, s, z in groups}, key=lambda k: (k[0], [int(v) for v in k[1].split("x")])
-    )
-    for pirl in pirls:
-        for sim, size in keys:
-            if (pirl, sim, size) not in groups:
-                continue
-            x = seed_scores(groups[(pirl, sim, size)], "vcr")
-            cells = [labels[pirl], sim, size]
-            for other in others:
-                if (other, sim, size) not in groups:
-                    cells.append("—")
-                    continue
-                y = seed_scores(groups[(other, sim, size)], "vcr")
-                p, lo, hi = probability_of_improvement(x, y)
-                cells.append(f"{p:.2f} [{lo:.2f}, {hi:.2f}]")
-            lines.append("| " + " | ".join(cells) + " |")
+    cells: dict[tuple[str, str, str], dict[str, str]] = {}
+    for f in found:
+        cell = cells.setdefault((f["pirl"], f["sim"], f["size"]), {})
+        cell[f["other"]] = f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
+    for (pirl, sim, size), row in cells.items():
+        values = [row.get(o, "—") for o in others]
+        lines.append("| " + " | ".join([pirl, sim, size, *values]) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _sizes_text(sizes: list[str]) -> str:
+    return ", ".join(sizes[:-1]) + f" and {sizes[-1]}" if len(sizes) > 1 else sizes[0]
+
+
+def summary_lines(
+    rows: list[dict[str, Any]],
+    found: list[dict[str, Any]],
+    advisor_stats: dict[str, Any] | None,
+    act: str,
+) -> list[str]:
+    """A few sentences generated from the numbers, for the top of the report: which PIRL
+    variants beat (or lose to) which methods with a P(improvement) interval that excludes
+    0.5, how far the best learned method is from the planner in VCR and steps, and how much
+    of each PIRL run advice shaped."""
+    lines = []
+    wins: dict[tuple[str, str], list[str]] = {}
+    losses: dict[tuple[str, str], list[str]] = {}
+    for f in found:
+        if f["sim"] != "grid":
+            continue
+        key = (f["pirl"], f["other"])
+        if f["lo"] > 0.5:
+            wins.setdefault(key, []).append(f"{f['size']} ({f['p']:.2f} [{f['lo']:.2f}, "
+                                            f"{f['hi']:.2f}])")  # fmt: skip
+        elif f["hi"] < 0.5:
+            losses.setdefault(key, []).append(f"{f['size']} ({f['p']:.2f} [{f['lo']:.2f}, "
+                                              f"{f['hi']:.2f}])")  # fmt: skip
+    for (pirl, other), where in wins.items():
+        lines.append(f"{pirl} beats {other} in VCR on {_sizes_text(where)} (P(improvement) "
+                     "[95% interval] excludes 0.5).")  # fmt: skip
+    for (pirl, other), where in losses.items():
+        lines.append(f"{pirl} is beaten by {other} in VCR on {_sizes_text(where)} "
+                     "(P(improvement) [95% interval] below 0.5).")  # fmt: skip
+    if found and not wins and not losses:
+        seeds = sorted({int(r.get("seeds", 1)) for r in rows if r["method"].startswith("pirl")})
+        lines.append(
+            "No PIRL variant beats or loses to any other method in VCR with a P(improvement) "
+            f"interval that excludes 0.5 (training seeds per PIRL row: "
+            f"{', '.join(map(str, seeds))}; more seeds narrow the intervals)."
+        )
+    grid = [r for r in _act_rows(rows, act) if r["sim"] == "grid"]
+    sizes = sorted({r["size"] for r in grid}, key=lambda z: [int(v) for v in z.split("x")])
+    gaps = []
+    for size in sizes:
+        here = [r for r in grid if r["size"] == size]
+        planner = next((r for r in here if r["method"] == "boustrophedon"), None)
+        learned = [r for r in here if r.get("act") != "fixed"]
+        if planner is None or not learned:
+            continue
+        best = max(learned, key=lambda r: r.get("vcr_iqm", r["vcr_mean"]))
+        vcr = best.get("vcr_iqm", best["vcr_mean"])
+        gaps.append(
+            f"on {size} {best['label']} reaches VCR {vcr:.2f} (IQM over seeds) in "
+            f"{best.get('steps_mean', math.nan):.0f} steps, the planner "
+            f"{planner.get('vcr_iqm', planner['vcr_mean']):.2f} in "
+            f"{planner.get('steps_mean', math.nan):.0f}"
+        )
+    if gaps:
+        lines.append(
+            f"Best learned method against the boustrophedon planner (act {act}): "
+            + "; ".join(gaps) + "."
+        )  # fmt: skip
+    runs = {n: s for n, s in (advisor_stats or {}).items() if isinstance(s, dict) and "steps" in s}
+    if runs:
+        parts = []
+        for name, st in sorted(runs.items()):
+            steps = max(1, int(st["steps"]))
+            unshaped = int(st.get("steps_unshaped", st.get("steps_missing", 0)))
+            parts.append(f"{name} {1 - unshaped / steps:.0%}")
+        lines.append(
+            "Share of training steps shaped by advice (student or teacher) per PIRL run: "
+            + ", ".join(parts) + "; an unshaped step trains as PPO-EWRI."
+        )  # fmt: skip
+    return lines
 
 
 def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str = "grid") -> Path:
@@ -465,8 +559,9 @@ def write_report(
 ) -> Path:
     """Write table.md, figure.png, intervals.png, learning_curves.png and report.html.
 
-    table.md holds, for the headline act mode first and then the other, the IQM tables over
-    seeds; then the probability of improvement of PIRL over each baseline (headline mode),
+    table.md and report.html open with a summary generated from the numbers
+    (:func:`summary_lines`); report.html shows the interval figures next. table.md then holds,
+    for the headline act mode first and then the other, the IQM tables over seeds; then the probability of improvement of PIRL over each baseline (headline mode),
     camera use, and the per-episode tables (the secondary spread).
     """
     folder.mkdir(parents=True, exist_ok=True)
@@ -475,10 +570,12 @@ def write_report(
     episodes_path = Path(summary).with_name("episodes.jsonl")
     records = [json.loads(line) for line in episodes_path.open()] if episodes_path.is_file() else []
     blocks = [markdown_tables(rows, act) for act in acts]
-    improvement = improvement_table(records, acts[0]) if records else ""
+    found = improvements(records, acts[0]) if records else []
+    improvement = improvement_table(records, acts[0], found)
+    summary_text = summary_lines(rows, found, advisor_stats, acts[0])
     camera = camera_table(rows)
     spread = [markdown_tables(rows, act, stat="episode") for act in acts]
-    table = "\n".join(
+    results = "\n".join(
         [
             f"Headline act mode: {acts[0]} (the same for every trained method; see "
             "docs/results.md).",
@@ -493,6 +590,7 @@ def write_report(
             *spread,
         ]
     )
+    table = "\n".join(["## Summary", "", *(f"- {line}" for line in summary_text), "", results])
     (folder / "table.md").write_text(table + "\n")
     figures = {"grid": bar_figure(rows, folder / "figure.png", "grid", acts[0])}
     if any(r["sim"] == "physics" for r in rows):
@@ -504,18 +602,24 @@ def write_report(
     }
     curves = learning_curves(runs, folder / "learning_curves.png")
 
+    # At a glance first: what the numbers say, then the intervals, then the tables.
     sections = [
         "<h1>PIRL reproduction report</h1>",
-        f"<p>Code version: <code>{html.escape(code_version)}</code></p>",
-        *(f"<p>{html.escape(n)}</p>" for n in notes),
-        "<h2>Results</h2>",
-        _md_table_to_html(table),
+        "<h2 id='summary'>Summary</h2><ul>",
+        *(f"<li>{html.escape(line)}</li>" for line in summary_text),
+        "</ul>",
     ]
     for act, path in intervals.items():
         sections.append(
             f"<h2>Aggregate intervals over seeds (grid, act {act})</h2>"
             f"<img alt='intervals {act}' src='{_data_uri(path)}'>"
         )
+    sections += [
+        f"<p>Code version: <code>{html.escape(code_version)}</code></p>",
+        *(f"<p>{html.escape(n)}</p>" for n in notes),
+        "<h2>Results</h2>",
+        _md_table_to_html(results),
+    ]
     for sim, path in figures.items():
         sections.append(
             f"<h2>Figure ({sim}, act {acts[0]}; per-episode spread)</h2>"
