@@ -496,3 +496,23 @@ def test_meta_steps_csv_line_endings_n_updates_and_the_differing_setting(tmp_pat
     with pytest.raises(ConfigError, match=r"ppo\.learning_rate") as info:
         distinct_specs([spec_for_run(run), spec_for_run(other)])
     assert "copies" not in str(info.value)
+
+
+def test_cache_locked_beyond_its_timeout_is_skipped_in_one_line(tmp_path, capsys):
+    import sqlite3
+
+    from pirl.advice.cache import CachedAdvisor
+    from pirl.advice.oracle import OracleAdvisor
+
+    path = tmp_path / "advice.sqlite"
+    holder = sqlite3.connect(path, isolation_level=None)
+    holder.execute("CREATE TABLE t (x)")
+    holder.execute("BEGIN EXCLUSIVE")  # another process in the middle of a long write
+    try:
+        cached = CachedAdvisor(OracleAdvisor(), path, timeout_s=0.5)
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "going on without it" in err[0] and str(path) in err[0]
+    assert cached.disabled and len(cached) == 0
