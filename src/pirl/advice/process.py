@@ -124,12 +124,15 @@ class ProcessAdvisor(Advisor):
     def close(self) -> None:
         """Stop the child (safe to call twice)."""
         if self._proc.is_alive():
-            try:
-                with self._lock:
+            # A call stuck past its deadline (a hung child) holds the lock: do not wait on it.
+            if self._lock.acquire(timeout=5):
+                try:
                     self._conn.send(("close",))
-            except (OSError, BrokenPipeError):
-                pass
-            self._proc.join(timeout=30)
+                except (OSError, BrokenPipeError):
+                    pass
+                finally:
+                    self._lock.release()
+                self._proc.join(timeout=30)
             if self._proc.is_alive():
                 self._proc.kill()
         self._conn.close()
