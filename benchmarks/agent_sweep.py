@@ -35,15 +35,14 @@ from pirl.evaluate.summary import interval_estimates
 ROOT = Path(__file__).resolve().parents[1]
 
 # name -> overrides of the profile (sections env and ppo); every variant trains the same runs.
+PAPER_OBS = {"obs_visits": False, "obs_target": False}
+MEMORY = {"obs_visits": True, "obs_target": True}
 VARIANTS: dict[str, dict[str, dict]] = {
-    "unmasked": {"ppo": {"action_masking": False}},
-    "masked": {"ppo": {"action_masking": True}},
-    "masked-memory": {
-        "ppo": {"action_masking": True},
-        "env": {"obs_visits": True, "obs_target": True},
-    },
-    "masked-visits": {"ppo": {"action_masking": True}, "env": {"obs_visits": True}},
-    "masked-target": {"ppo": {"action_masking": True}, "env": {"obs_target": True}},
+    "unmasked": {"ppo": {"action_masking": False}, "env": PAPER_OBS},
+    "masked": {"ppo": {"action_masking": True}, "env": PAPER_OBS},
+    "masked-memory": {"ppo": {"action_masking": True}, "env": MEMORY},
+    "masked-visits": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_visits": True}},
+    "masked-target": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_target": True}},
 }
 
 
