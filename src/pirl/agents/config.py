@@ -212,6 +212,11 @@ class ReproduceSettings:
     """The mode of the report's first table and figure, the same for every learned method."""
     train_workers: int = 0
     """Training runs at once, each a process with one torch and one numba thread (0 = cores)."""
+    teacher_phase_answers: int = 0
+    """A head start for slow teachers: before the PIRL runs of an LLM teacher in student mode,
+    it answers this many planner states into the shared teacher dataset (in a worker of its
+    own while PPO-SR and PPO-EWRI train; answers already there count), so the student passes
+    its gate at the run's first rollouts. 0 = no teacher phase."""
 
 
 _SECTIONS = {
@@ -345,6 +350,10 @@ def _validate(cfg: RunConfig) -> None:
     ):
         if not 0 <= value <= 1:
             raise ConfigError(f"{key}={value!r}: must be in [0, 1]")
+    if cfg.reproduce.teacher_phase_answers < 0:
+        raise ConfigError(
+            f"reproduce.teacher_phase_answers={cfg.reproduce.teacher_phase_answers!r}: must be >= 0"
+        )
     if not 0 < cfg.il.valid_fraction < 1:
         raise ConfigError(f"il.valid_fraction={cfg.il.valid_fraction!r}: must be in (0, 1)")
     if not all(isinstance(n, int) and n > 0 for n in p.net_arch):

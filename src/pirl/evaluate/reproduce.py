@@ -27,6 +27,7 @@ from pirl.agents.loading import (
     check_act,  # noqa: I001
 )
 from pirl.agents.runs import train_one
+from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
 from pirl.evaluate.runner import EvalPlan, distinct_specs, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.evaluate.summary import honest_label
@@ -140,8 +141,40 @@ def _worker_init() -> None:
 def _train_job(job: PlannedRun, cfg_dict: dict[str, Any], run: str, resume: bool) -> float:
     start = time.perf_counter()
     cfg = RunConfig.from_dict(cfg_dict)
-    train_one(job.method, job.advisor, job.seed, cfg, Path(run), resume, False, dict(job.pare))
+    if job.method == TEACHER:
+        phase = TeacherPhase(job.advisor, job.pare, cfg.reproduce.teacher_phase_answers)
+        _log_phase(phase, run_teacher_phase(cfg, phase), print)
+    else:
+        train_one(job.method, job.advisor, job.seed, cfg, Path(run), resume, False, dict(job.pare))
     return time.perf_counter() - start
+
+
+TEACHER = "teacher"
+"""The method name of a teacher phase among the training jobs (it has no run folder)."""
+
+
+def teacher_phases(cfg: RunConfig, jobs: list[PlannedRun]) -> dict[str, TeacherPhase]:
+    """The teacher phase each PIRL job waits for (by job name); one phase per teacher."""
+    out = {}
+    for job in jobs:
+        if job.method == "pirl":
+            phase = phase_of(cfg, dict(job.pare))
+            if phase is not None:
+                out[job.name] = phase
+    return out
+
+
+def _log_phase(phase: TeacherPhase, done: dict[str, Any], log: Log) -> None:
+    log(
+        f"{phase.name}: {done['teacher']} answered {done['asked']} planner states, "
+        f"{done['stored']} stored (the dataset had {done['had']}; wanted {phase.answers}) "
+        f"in {done['seconds']:.0f} s"
+    )
+
+
+def _phase_jobs(phases: dict[str, TeacherPhase]) -> list[PlannedRun]:
+    unique = {p.name: p for p in phases.values()}
+    return [PlannedRun(p.name, TEACHER, p.advisor, 0, p.pare) for p in unique.values()]
 
 
 def train_all(
@@ -178,33 +211,48 @@ def train_all(
         resume = state == "resumable"
         log(f"{job.name}: {'resuming' if resume else 'training'}")
         todo.append((job, run, resume))
+    phases = teacher_phases(cfg, [job for job, _, _ in todo])
     if ray_address:
+        for phase in {p.name: p for p in phases.values()}.values():  # here, before the runs
+            _log_phase(phase, run_teacher_phase(cfg, phase), log)
         remote = [TrainJob(j.name, j.method, j.advisor, j.seed, r, res, j.pare)
                   for j, r, res in todo]  # fmt: skip
         train_on_ray(ray_address, cfg, remote, log)
         return finished
     workers = workers if workers is not None else (cfg.reproduce.train_workers or default_workers())
-    workers = max(1, min(workers, len(todo)))
+    workers = max(1, min(workers, len(todo) + len(_phase_jobs(phases))))
     if workers == 1:
+        for phase in {p.name: p for p in phases.values()}.values():
+            _log_phase(phase, run_teacher_phase(cfg, phase), log)
         for job, run, resume in sorted(todo, key=lambda t: t[0].method == "il"):
             start = time.perf_counter()
             train_one(job.method, job.advisor, job.seed, cfg, run, resume, show_progress,
                       dict(job.pare))  # fmt: skip
             log(f"{job.name}: done in {time.perf_counter() - start:.0f} s")
         return finished
-    _train_parallel(cfg, todo, workers, log)
+    _train_parallel(cfg, todo, workers, log, phases)
     return finished
 
 
 def _train_parallel(
-    cfg: RunConfig, todo: list[tuple[PlannedRun, Path, bool]], workers: int, log: Log
+    cfg: RunConfig,
+    todo: list[tuple[PlannedRun, Path, bool]],
+    workers: int,
+    log: Log,
+    phases: dict[str, TeacherPhase] | None = None,
 ) -> None:
-    """``todo`` in ``workers`` processes; IL waits for its expert. Every run goes to its end
+    """``todo`` in ``workers`` processes; IL waits for its expert, a PIRL run for its
+    teacher's phase (which goes first, beside PPO-SR and PPO-EWRI). Every run goes to its end
     even when another fails (finished runs are kept); then the first failure is raised."""
     cfg_dict = cfg.to_dict()
-    waiting = [t for t in todo if t[0].method == "il"]
-    ready = [t for t in todo if t[0].method != "il"]
-    pending_experts = {t[0].name for t in ready if t[0].method == "ppo-ewri"}
+    phases = phases or {}
+    needs: dict[str, str] = {t[0].name: f"ppo-ewri-s{t[0].seed}" for t in todo
+                             if t[0].method == "il"}  # fmt: skip
+    needs.update({name: phase.name for name, phase in phases.items()})
+    ready = [(j, Path(j.name), False) for j in _phase_jobs(phases)]
+    ready += [t for t in todo if t[0].name not in needs]
+    waiting = [t for t in todo if t[0].name in needs]
+    pending = {t[0].name for t in ready}
     failure: BaseException | None = None
     log(f"training {len(todo)} runs in {workers} worker processes (1 torch + 1 numba thread each)")
     ctx = mp.get_context("spawn")
@@ -218,7 +266,7 @@ def _train_parallel(
         for item in ready:
             submit(item)
         for item in list(waiting):
-            if f"ppo-ewri-s{item[0].seed}" not in pending_experts:
+            if needs[item[0].name] not in pending:  # its prerequisite was done before
                 waiting.remove(item)
                 submit(item)
         while futures:
@@ -231,15 +279,17 @@ def _train_parallel(
                     ok = True
                 except Exception as exc:  # noqa: BLE001 - reported, raised after the others
                     log(f"{job.name}: failed ({type(exc).__name__}: {exc})")
-                    failure = failure or exc
-                pending_experts.discard(job.name)
+                    if job.method != TEACHER:  # a failed head start only slows PIRL down
+                        failure = failure or exc
+                pending.discard(job.name)
                 for item in list(waiting):
-                    if f"ppo-ewri-s{item[0].seed}" == job.name:
-                        waiting.remove(item)
-                        if ok:
-                            submit(item)
-                        else:
-                            log(f"{item[0].name}: not trained (its expert failed)")
+                    if needs[item[0].name] != job.name:
+                        continue
+                    waiting.remove(item)
+                    if ok or job.method == TEACHER:
+                        submit(item)  # without a head start it still trains, and says so
+                    else:
+                        log(f"{item[0].name}: not trained (its expert failed)")
     if failure is not None:
         raise failure
 
@@ -259,6 +309,9 @@ RATES: dict[str, Any] = {
     "eval_eps_per_s": {30: 145.0},
     "physics_s_per_episode": 30.0,
     "llm_only_s_per_call": 1.0,
+    # A teacher phase: the embedded model with prefix reuse, batches of 16, beside one PPO
+    # worker (benchmarks/advice_throughput.py --prefix-reuse); a server: one answer a second.
+    "teacher_answers_per_s": {"local": 0.8, "openai": 1.0},
 }
 
 
@@ -283,7 +336,20 @@ def describe_plan(
             if pare.mode != "student" and j.advisor == "local":  # every K steps an answer
                 batches = cfg.train.total_steps / pare.query_every / cfg.advisor.local_batch_size
                 ppo_s += batches * r["local_batch_s"]
-    train_min = ppo_s / max(1, min(train_workers, len(todo) or 1)) / 60
+    phases = {p.name: p for p in teacher_phases(cfg, todo).values()}
+    phase_lines = []
+    for phase in phases.values():
+        seconds = phase.answers / r["teacher_answers_per_s"].get(phase.advisor, 1.0)
+        ppo_s += seconds  # it takes a worker while PPO-SR and PPO-EWRI train
+        waiting = sum(1 for j in todo if j.method == "pirl" and phase_of(cfg, dict(j.pare)))
+        phase_lines.append(
+            f"plan: teacher phase {phase.name}: the {phase.advisor} teacher answers "
+            f"{phase.answers} planner states into the shared teacher dataset (answers already "
+            f"there count) in one worker while PPO-SR and PPO-EWRI train: about "
+            f"{seconds / 60:.0f} min; its {waiting} PIRL runs start after it, with a student "
+            "past its gate"
+        )
+    train_min = ppo_s / max(1, min(train_workers, len(todo) + len(phases) or 1)) / 60
     sizes = [parse_size(s) for s in rp.sizes]
     learned = len(jobs) * len(rp.acts)
     eval_s = 0.0
@@ -302,6 +368,7 @@ def describe_plan(
     eval_min = eval_s / max(1, eval_workers) / 60
     total_eval = learned * rp.episodes * len(sizes)
     return [
+        *phase_lines,
         f"plan: {len(jobs)} training runs ({len(todo)} to train) of {cfg.train.total_steps:,} "
         f"steps, seeds {list(rp.seeds)}, in {train_workers} worker processes: about "
         f"{train_min:.0f} min",
