@@ -168,6 +168,24 @@ def test_student_mode_shapes_every_step_with_advice_about_the_current_state(tmp_
     pare.close()
 
 
+@pytest.mark.parametrize("growth", [0.0, 0.5])
+def test_refits_become_rarer_once_the_student_has_passed_its_gate(tmp_path, growth):
+    pare = _student_pare(tmp_path, OracleAdvisor(), refit_growth=growth)
+    pare.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(160):  # 20 boundaries, new answers at each
+        pare.step(rng.integers(0, 12, pare.num_envs))
+    st = pare.stats.as_dict()
+    assert st["gate_passed_at_step"] > 0
+    assert st["student_refits"] + st["student_refits_deferred"] >= 18
+    if growth == 0:
+        assert st["student_refits_deferred"] == 0
+    else:  # each refit waits for 50% more answers: a handful of refits, not one per rollout
+        assert st["student_refits"] <= 10 and st["student_refits_deferred"] >= 8
+    assert st["refit_s"] > 0 and st["student_s"] > 0 and st["teacher_s"] > 0
+    pare.close()
+
+
 def test_student_gate_keeps_steps_unshaped_until_agreement(tmp_path):
     pare = _student_pare(tmp_path, OracleAdvisor(), gate=1.01)  # a gate no student passes
     pare.reset()

@@ -107,6 +107,9 @@ class PareSettings:
     """Student mode: held-out agreement with the teacher before the student shapes rewards."""
     student_fit_steps: int = 100
     """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
+    student_refit_growth: float = 0.25
+    """Student mode: once past its gate, the student is refit only when the teacher's answers
+    have grown by this share since its last fit (0 = at every rollout with new answers)."""
     student_hidden: int = 128
     """Student mode: width of the student's two hidden layers."""
     student_dataset: str = ""
@@ -350,6 +353,8 @@ def _validate(cfg: RunConfig) -> None:
     ):
         if not 0 <= value <= 1:
             raise ConfigError(f"{key}={value!r}: must be in [0, 1]")
+    if pare.student_refit_growth < 0:
+        raise ConfigError(f"pare.student_refit_growth={pare.student_refit_growth!r}: must be >= 0")
     if cfg.reproduce.teacher_phase_answers < 0:
         raise ConfigError(
             f"reproduce.teacher_phase_answers={cfg.reproduce.teacher_phase_answers!r}: must be >= 0"

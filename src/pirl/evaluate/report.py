@@ -561,8 +561,9 @@ def write_report(
 
     table.md and report.html open with a summary generated from the numbers
     (:func:`summary_lines`); report.html shows the interval figures next. table.md then holds,
-    for the headline act mode first and then the other, the IQM tables over seeds; then the probability of improvement of PIRL over each baseline (headline mode),
-    camera use, and the per-episode tables (the secondary spread).
+    for the headline act mode first and then the other, the IQM tables over seeds; then the
+    probability of improvement of PIRL over each baseline (headline mode), camera use, and the
+    per-episode tables (the secondary spread).
     """
     folder.mkdir(parents=True, exist_ok=True)
     rows = read_summary(summary)

@@ -164,11 +164,18 @@ class PareStats:
     student_per_field: dict[str, float] = field(default_factory=dict)
     student_dataset_size: int = 0
     student_refits: int = 0
+    student_refits_deferred: int = 0
     gate_passed_at_step: int = -1
     budget_exhausted: bool = False
     budget_exhausted_at_step: int = -1
     failure_rate: float = 0.0
     wait_s: float = 0.0
+    student_s: float = 0.0
+    """Student mode, seconds in the training loop: features and the student's advice."""
+    teacher_s: float = 0.0
+    """Student mode: sampling states for the teacher, storing its answers, sending batches."""
+    refit_s: float = 0.0
+    """Student mode: pulling new answers and refitting the student."""
 
     def as_dict(self) -> dict[str, Any]:
         out = dict(self.__dict__)
@@ -202,6 +209,9 @@ class PAREVecEnv(VecEnvWrapper):
         gate: student mode: held-out agreement the student needs before it shapes.
         refit_every: student mode: vector steps between refits (PPO's ``n_steps``).
         fit_steps: student mode: Adam steps per refit.
+        refit_growth: student mode: once the student has passed its gate, refit only when
+            the answers have grown by this share since the last fit (0: at every boundary
+            with new answers).
         wait_teacher: student mode: collect the teacher's batch at each boundary (reproducible
             runs; PPO then waits for a slow teacher).
         teacher_batch: student mode: most prompts per teacher request.
@@ -231,6 +241,7 @@ class PAREVecEnv(VecEnvWrapper):
         gate: float = 0.8,
         refit_every: int = 256,
         fit_steps: int = 100,
+        refit_growth: float = 0.0,
         wait_teacher: bool = False,
         teacher_batch: int = 16,
         max_failure_rate: float = 0.5,
@@ -259,6 +270,7 @@ class PAREVecEnv(VecEnvWrapper):
         self.student, self.dataset = student, dataset
         self.gate, self.refit_every = float(gate), int(refit_every)
         self.fit_steps, self.wait_teacher = int(fit_steps), bool(wait_teacher)
+        self.refit_growth = float(refit_growth)
         self.max_failure_rate, self.failure_window = float(max_failure_rate), int(failure_window)
         self.stats = PareStats(label=label, mode=mode)
 
@@ -296,8 +308,11 @@ class PAREVecEnv(VecEnvWrapper):
     def _advise_current(self, obs: np.ndarray) -> None:
         """Student mode: the student's advice about every world's current state."""
         assert self.student is not None and self.teacher is not None
+        start = time.perf_counter()
         features = student_features(obs, self._world, range(self.num_envs))
+        sampled = time.perf_counter()
         self.teacher.sample(self._world, features)
+        asked = time.perf_counter()
         if self.student.passes(self.gate):
             self._rec[:] = self.student.predict(features)
             self._meta[:, HAS] = 1
@@ -305,18 +320,34 @@ class PAREVecEnv(VecEnvWrapper):
             self._meta[:, KIND] = KIND_STUDENT
         else:
             self._meta[:, HAS] = 0
+        self.stats.teacher_s += asked - sampled
+        self.stats.student_s += (sampled - start) + (time.perf_counter() - asked)
 
     def _boundary(self) -> None:
         """Student mode, at a rollout boundary: store teacher answers, refit the student."""
         assert self.student is not None and self.teacher is not None
+        start = time.perf_counter()
         answers = self.teacher.boundary(self._t, wait=self.wait_teacher, timeout_s=self.timeout_s)
+        self.stats.teacher_s += time.perf_counter() - start
         self._account(answers)
         self.stats.prompts_sent = self.teacher.sent
         self.stats.teacher_skipped = self.teacher.skipped
         assert self.dataset is not None
-        if self.student.pull(self.dataset):
-            self.student.fit(self.fit_steps)
+        start = time.perf_counter()
+        student = self.student
+        student.pull(self.dataset)
+        new = student.dataset_size - student.fitted_rows
+        # Refit at every boundary with new answers until the gate passes; after that only
+        # once the data has grown by refit_growth since the last fit: as the student
+        # converges, refits (the largest cost PIRL adds to PPO) become rarer.
+        if new > 0 and (
+            not student.passes(self.gate) or new >= self.refit_growth * student.fitted_rows
+        ):
+            student.fit(self.fit_steps)
             self.stats.student_refits += 1
+        elif new > 0:
+            self.stats.student_refits_deferred += 1
+        self.stats.refit_s += time.perf_counter() - start
         self._update_student_stats()
         self._check_budget()
 
