@@ -80,13 +80,16 @@ def test_ppo_and_il_runs_load_as_policies(tmp_path):
     assert 0.0 <= stats["valid_accuracy"] <= 1.0
     assert stats["train_rows"] + stats["valid_rows"] <= cfg.il.expert_steps
     assert il_model.is_file()
-    env = VCPPEnv(size=(15, 15, 3))
+    env = VCPPEnv(cfg.env)  # the observation layout the runs trained with
     ppo, il = load_policy(expert), load_policy(tmp_path / "il")
     assert isinstance(ppo, PPOPolicy) and ppo.label == "PPO-EWRI"
     assert isinstance(il, TabNetPolicy)
     for policy in (ppo, il, load_policy("boustrophedon"), load_policy("random", seed=1)):
         metrics = run_episode(env, policy, seed=11).metrics
         assert 0.0 <= metrics["vcr"] <= 1.0
+    other = VCPPEnv(cfg.env.replace(obs_visits=False, obs_target=False))
+    with pytest.raises(ConfigError, match="observations of 441 values; this environment gives 317"):
+        run_episode(other, ppo, seed=11)
     with pytest.raises(ConfigError, match="not a finished PPO run|not a run folder"):
         train_il(cfg, tmp_path / "il", tmp_path / "il2")
     with pytest.raises(ConfigError, match="neither a run folder nor a method"):

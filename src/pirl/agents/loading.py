@@ -53,6 +53,8 @@ class LearnedPolicy(Policy):
     # Trained with valid-action masks (the run's ppo.action_masking): acts on masked
     # probabilities too, as MaskablePPO's distribution does (invalid actions get 0).
     masked = False
+    # Length of the observations it was trained on (None: unknown, not checked).
+    obs_size: int | None = None
     _rng: np.random.Generator | None = None
 
     def set_act(self, mode: str) -> LearnedPolicy:
@@ -74,7 +76,14 @@ class LearnedPolicy(Policy):
     ) -> np.ndarray:
         """One action per row of ``obs``; ``masks`` (batch, N_ACTIONS) are the valid actions,
         applied when the policy is :attr:`masked`."""
-        probs = self.probabilities(np.asarray(obs, dtype=np.float32))
+        obs = np.asarray(obs, dtype=np.float32)
+        if self.obs_size is not None and obs.shape[-1] != self.obs_size:
+            raise ConfigError(
+                f"{self.label} was trained on observations of {self.obs_size} values; this "
+                f"environment gives {obs.shape[-1]} (env.obs_window, obs_global, obs_visits and "
+                "obs_target must be the run's own: see its config.yaml)"
+            )
+        probs = self.probabilities(obs)
         if self.masked:
             if masks is None:
                 raise ValueError(f"{self.label} was trained with action masks; give them")
@@ -127,6 +136,7 @@ class PPOPolicy(LearnedPolicy):
             self.model = PPO.load(model_path, device=device)
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
             raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+        self.obs_size = int(self.model.observation_space.shape[0])
         self.name = name
         self.label = LABELS.get(name, name)
 
@@ -155,6 +165,7 @@ class TabNetPolicy(LearnedPolicy):
             self.model.load_model(str(model_path))
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
             raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+        self.obs_size = int(getattr(self.model, "input_dim", 0) or 0) or None
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         from pirl.world.dynamics import N_ACTIONS
