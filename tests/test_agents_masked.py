@@ -17,7 +17,6 @@ from pirl.agents.loading import load_policy, mask_probabilities, run_masked
 from pirl.agents.train import train
 from pirl.env.vcpp_env import VCPPEnv
 from pirl.evaluate.rollout import run_batch, run_episode
-from pirl.world import dynamics as D
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"

@@ -22,7 +22,7 @@ def test_sizes_and_default_layout_unchanged():
     a, _ = plain.reset(seed=4)
     b, _ = both.reset(seed=4)
     assert np.array_equal(a, b[:BASE])  # the paper's block comes first, unchanged
-    assert ((0 <= b) & (b <= 1)).all()
+    assert ((b >= 0) & (b <= 1)).all()
 
 
 def test_visit_window_counts_the_cells_flown_through():
