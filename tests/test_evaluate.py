@@ -211,3 +211,16 @@ def test_camera_table_gives_steps_relative_to_the_planner():
     ewri = next(line for line in table.splitlines() if line.startswith("| PPO-EWRI"))
     cells = [c.strip() for c in ewri.strip("|").split("|")]
     assert cells[-2] == "1.50" and cells[-1] == "0.30"
+
+
+def test_report_settings_line_says_masked_or_not():
+    from pathlib import Path
+
+    from pirl.agents.config import RunConfig
+    from pirl.evaluate.reproduce import settings_line
+
+    root = Path(__file__).resolve().parents[1] / "configs"
+    quick = settings_line(RunConfig.from_yaml(root / "quick.yaml"))
+    paper = settings_line(RunConfig.from_yaml(root / "paper.yaml"))
+    assert "valid-action masks" in quick and "visit counts" in quick
+    assert "no action masks" in paper and "the paper's observation" in paper

@@ -491,6 +491,7 @@ def reproduce(
         f"Trained policies are evaluated acting {' and '.join(rp.acts)}; the headline mode is "
         f"{rp.headline_act} for every trained method (docs/results.md says why).",
         "Advisors other than an LLM (the oracle) and planners are labelled as such.",
+        settings_line(cfg),
     ]
     return write_report(
         out / "report",
@@ -502,6 +503,27 @@ def reproduce(
         notes=notes,
         headline_act=rp.headline_act,
     )
+
+
+def settings_line(cfg: RunConfig) -> str:
+    """The agent settings that differ from the paper's, in one sentence for the report."""
+    env = cfg.env
+    named = (
+        ("visit counts", env.obs_visits),
+        ("way to the nearest uncovered cell", env.obs_target),
+    )
+    blocks = [name for name, on in named if on]
+    masks = (
+        "trained and evaluated with valid-action masks (sb3-contrib MaskablePPO)"
+        if cfg.ppo.action_masking
+        else "no action masks (the paper's action space)"
+    )
+    seen = (
+        f"observation with {' and '.join(blocks)} beyond the paper's"
+        if blocks
+        else "the paper's observation"
+    )
+    return f"Agents: {masks}; {seen} (docs/deviations.md)."
 
 
 def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
