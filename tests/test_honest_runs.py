@@ -120,3 +120,34 @@ def test_an_unparseable_probe_answer_is_one_warning_line(tmp_path):
     build_pirl_advice(cfg, advisor, probe=True, log=lines.append)
     assert len(lines) == 1 and lines[0].startswith("warning:")
     assert "does not parse" in lines[0] and "pirl advise" in lines[0]
+
+
+def test_the_summary_claims_only_what_the_intervals_show():
+    from pirl.evaluate.report import summary_lines
+
+    def cmp(other, n_pirl, n_other, lo, hi, fixed=False, size="30x30x3"):
+        return {"pirl": "PIRL (x)", "other": other, "sim": "grid", "size": size,
+                "p": (lo + hi) / 2, "lo": lo, "hi": hi, "n_pirl": n_pirl, "n_other": n_other,
+                "fixed": fixed}  # fmt: skip
+
+    rows = [
+        {"method": "pirl", "label": "PIRL (x)", "sim": "grid", "size": "30x30x3",
+         "act": "stochastic", "seeds": 3, "vcr_iqm": 0.7, "vcr_mean": 0.7, "steps_mean": 300.0},
+        {"method": "boustrophedon", "label": "planner", "sim": "grid", "size": "30x30x3",
+         "act": "fixed", "seeds": 1, "vcr_iqm": 1.0, "vcr_mean": 1.0, "steps_mean": 120.0},
+    ]  # fmt: skip
+    found = [
+        cmp("PPO-SR", 3, 3, 0.6, 0.9),
+        cmp("planner", 3, 1, 0.0, 0.1, fixed=True),
+        cmp("PPO-EWRI", 3, 3, 0.3, 0.8),  # includes 0.5: no claim
+    ]
+    stats = {"pirl-s0": {"steps": 100, "steps_unshaped": 10}}
+    lines = summary_lines(rows, found, stats, "stochastic")
+    text = " ".join(lines)
+    assert "PIRL (x) beats PPO-SR (30x30x3 0.75 [0.60, 0.90]) and loses to planner" in text
+    assert "PPO-EWRI" not in lines[0]
+    assert "PIRL (x) reaches VCR 0.70" in text and "the planner 1.00 in 120" in text
+    assert "pirl-s0 90%" in text
+    # One run against one: P is 0 or 1 with a point interval, never a claim.
+    single = summary_lines(rows, [cmp("PPO-SR", 1, 1, 1.0, 1.0)], None, "stochastic")
+    assert single[0].startswith("No PIRL variant") and "one training run per row" in single[0]

@@ -246,7 +246,8 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
 def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
     """P(each PIRL variant improves on each other method) in VCR, runs (seeds) as the unit,
     per sim and size, with its stratified bootstrap 95% interval (rliable): one dict per
-    comparison (``pirl``, ``other`` labels, ``sim``, ``size``, ``p``, ``lo``, ``hi``)."""
+    comparison (``pirl``, ``other`` labels, ``sim``, ``size``, ``p``, ``lo``, ``hi``, the runs
+    on each side ``n_pirl``, ``n_other``, and ``fixed`` for a method without training runs)."""
     from pirl.evaluate.summary import probability_of_improvement, seed_scores
 
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
@@ -276,8 +277,10 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
                     continue
                 y = seed_scores(groups[(other, sim, size)], "vcr")
                 p, lo, hi = probability_of_improvement(x, y)
+                fixed = all(r.get("act") == "fixed" for r in groups[(other, sim, size)])
                 out.append({"pirl": labels[pirl], "other": labels[other], "sim": sim,
-                            "size": size, "p": p, "lo": lo, "hi": hi})  # fmt: skip
+                            "size": size, "p": p, "lo": lo, "hi": hi, "n_pirl": x.shape[0],
+                            "n_other": y.shape[0], "fixed": fixed})  # fmt: skip
     return out
 
 
@@ -310,10 +313,6 @@ def improvement_table(
     return "\n".join(lines) + "\n"
 
 
-def _sizes_text(sizes: list[str]) -> str:
-    return ", ".join(sizes[:-1]) + f" and {sizes[-1]}" if len(sizes) > 1 else sizes[0]
-
-
 def summary_lines(
     rows: list[dict[str, Any]],
     found: list[dict[str, Any]],
@@ -325,30 +324,34 @@ def summary_lines(
     0.5, how far the best learned method is from the planner in VCR and steps, and how much
     of each PIRL run advice shaped."""
     lines = []
-    wins: dict[tuple[str, str], list[str]] = {}
-    losses: dict[tuple[str, str], list[str]] = {}
+    # pirl -> "beats"/"loses to" -> other -> ["30x30x3 0.90 [0.75, 1.00]", ...]
+    verdicts: dict[str, dict[str, dict[str, list[str]]]] = {}
+    judged = False
     for f in found:
-        if f["sim"] != "grid":
+        # One training run against one gives P of 0 or 1 with a point "interval": no claim.
+        if f["sim"] != "grid" or f["n_pirl"] < 2 or (f["n_other"] < 2 and not f["fixed"]):
             continue
-        key = (f["pirl"], f["other"])
-        if f["lo"] > 0.5:
-            wins.setdefault(key, []).append(f"{f['size']} ({f['p']:.2f} [{f['lo']:.2f}, "
-                                            f"{f['hi']:.2f}])")  # fmt: skip
-        elif f["hi"] < 0.5:
-            losses.setdefault(key, []).append(f"{f['size']} ({f['p']:.2f} [{f['lo']:.2f}, "
-                                              f"{f['hi']:.2f}])")  # fmt: skip
-    for (pirl, other), where in wins.items():
-        lines.append(f"{pirl} beats {other} in VCR on {_sizes_text(where)} (P(improvement) "
-                     "[95% interval] excludes 0.5).")  # fmt: skip
-    for (pirl, other), where in losses.items():
-        lines.append(f"{pirl} is beaten by {other} in VCR on {_sizes_text(where)} "
-                     "(P(improvement) [95% interval] below 0.5).")  # fmt: skip
-    if found and not wins and not losses:
-        seeds = sorted({int(r.get("seeds", 1)) for r in rows if r["method"].startswith("pirl")})
+        judged = True
+        verdict = "beats" if f["lo"] > 0.5 else "loses to" if f["hi"] < 0.5 else None
+        if verdict is not None:
+            where = f"{f['size']} {f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
+            per = verdicts.setdefault(f["pirl"], {}).setdefault(verdict, {})
+            per.setdefault(f["other"], []).append(where)
+    for pirl, per in verdicts.items():
+        parts = [
+            f"{verdict} " + "; ".join(f"{other} ({', '.join(where)})" for other, where in o.items())
+            for verdict, o in per.items()
+        ]
         lines.append(
-            "No PIRL variant beats or loses to any other method in VCR with a P(improvement) "
-            f"interval that excludes 0.5 (training seeds per PIRL row: "
-            f"{', '.join(map(str, seeds))}; more seeds narrow the intervals)."
+            f"{pirl} {' and '.join(parts)}: P(improvement) in VCR [95% interval] excludes 0.5."
+        )
+    if found and not verdicts:
+        seeds = sorted({int(r.get("seeds", 1)) for r in rows if r["method"].startswith("pirl")})
+        why = "" if judged else " (one training run per row: no interval to judge)"
+        lines.append(
+            "No PIRL variant beats or loses to another method in VCR with a P(improvement) "
+            f"interval that excludes 0.5{why}; training seeds per PIRL row: "
+            f"{', '.join(map(str, seeds))}, more seeds narrow the intervals."
         )
     grid = [r for r in _act_rows(rows, act) if r["sim"] == "grid"]
     sizes = sorted({r["size"] for r in grid}, key=lambda z: [int(v) for v in z.split("x")])
