@@ -144,7 +144,7 @@ def test_the_summary_claims_only_what_the_intervals_show():
     stats = {"pirl-s0": {"steps": 100, "steps_unshaped": 10}}
     lines = summary_lines(rows, found, stats, "stochastic")
     text = " ".join(lines)
-    assert "PIRL (x) beats PPO-SR (30x30x3 0.75 [0.60, 0.90]) and loses to planner" in text
+    assert "PIRL (x) beats PPO-SR (30x30x3: 0.75 [0.60, 0.90]) and loses to planner" in text
     assert "PPO-EWRI" not in lines[0]
     assert "PIRL (x) reaches VCR 0.70" in text and "the planner 1.00 in 120" in text
     assert "pirl-s0 90%" in text

@@ -324,8 +324,8 @@ def summary_lines(
     0.5, how far the best learned method is from the planner in VCR and steps, and how much
     of each PIRL run advice shaped."""
     lines = []
-    # pirl -> "beats"/"loses to" -> other -> ["30x30x3 0.90 [0.75, 1.00]", ...]
-    verdicts: dict[str, dict[str, dict[str, list[str]]]] = {}
+    # pirl -> "beats"/"loses to" -> other -> [("30x30x3", "0.90 [0.75, 1.00]"), ...]
+    verdicts: dict[str, dict[str, dict[str, list[tuple[str, str]]]]] = {}
     judged = False
     for f in found:
         # One training run against one gives P of 0 or 1 with a point "interval": no claim.
@@ -334,12 +334,18 @@ def summary_lines(
         judged = True
         verdict = "beats" if f["lo"] > 0.5 else "loses to" if f["hi"] < 0.5 else None
         if verdict is not None:
-            where = f"{f['size']} {f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
+            where = (f["size"], f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]")
             per = verdicts.setdefault(f["pirl"], {}).setdefault(verdict, {})
             per.setdefault(f["other"], []).append(where)
+
+    def sizes(where: list[tuple[str, str]]) -> str:
+        if len({p for _, p in where}) == 1:  # the same P everywhere: say it once
+            return f"{', '.join(z for z, _ in where)}: {where[0][1]}"
+        return ", ".join(f"{z} {p}" for z, p in where)
+
     for pirl, per in verdicts.items():
         parts = [
-            f"{verdict} " + "; ".join(f"{other} ({', '.join(where)})" for other, where in o.items())
+            f"{verdict} " + "; ".join(f"{other} ({sizes(where)})" for other, where in o.items())
             for verdict, o in per.items()
         ]
         lines.append(
