@@ -144,7 +144,8 @@ def test_the_camera_study_profile_loads_and_runs_at_test_size(tmp_path):
     assert set(rp["acts"]) == {"stochastic", "greedy"}
     for section in ("env", "ppo", "train", "il"):  # the study's design at the test's budgets
         study[section] = tiny[section]
-    study["reproduce"].update(seeds=[0], sizes=["12"], episodes=2)
+    # No teacher phase here (tests/test_teacher_phase.py runs one): 200 LLM answers take minutes.
+    study["reproduce"].update(seeds=[0], sizes=["12"], episodes=2, teacher_phase_answers=0)
     cfg = RunConfig.from_dict(study)
     logs: list[str] = []
     report = reproduce(cfg, tmp_path, advisor="local", log=logs.append, show_progress=False)

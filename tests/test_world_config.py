@@ -205,9 +205,12 @@ def test_yaml_round_trip(tmp_path):
     assert VCPPConfig.from_yaml(path) == cfg
 
 
-def test_empty_yaml_gives_the_defaults(tmp_path):
+def test_empty_yaml_is_refused_and_braces_give_the_defaults(tmp_path):
     path = tmp_path / "empty.yaml"
     path.write_text("")
+    with pytest.raises(ConfigError, match="is empty"):
+        VCPPConfig.from_yaml(path)
+    path.write_text("{}\n")
     assert VCPPConfig.from_yaml(path) == VCPPConfig()
 
 
