@@ -141,6 +141,7 @@ class Mission:
         self._weights = np.zeros((1, len(REWARD_TERMS)))
         self._seen = np.zeros(env_cfg.size[:2], dtype=np.bool_)
         self._index = np.array([0], dtype=np.int64)
+        self._masks = np.ones((1, D.N_ACTIONS), dtype=np.bool_)  # written at every info
         p = self.physics
         self._camera_energy = env_cfg.energy_camera if p.camera_energy is None else p.camera_energy
         self._sample_period = 1.0 / p.sample_hz
@@ -470,10 +471,9 @@ class Mission:
         w = self.world
         metrics = {0: self.metrics()} if self.done else {}
         # The grid's valid-action rule, so a policy trained with masks flies with them too.
-        masks = np.ones((1, D.N_ACTIONS), dtype=np.bool_)
-        D.action_masks(self._index, w.ints, w.blocked, w.pi, masks)
+        D.action_masks(self._index, w.ints, w.blocked, w.pi, self._masks)
         snap = InfoSnapshot(
-            w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics, masks
+            w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics, self._masks
         )
         return snap.info(0)
 
