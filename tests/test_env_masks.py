@@ -7,9 +7,9 @@ import numpy as np
 from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_supported
 from stable_baselines3.common.vec_env import VecMonitor
 
+from pirl.config.grid import PAN_MAX, PAN_MIN, TILT_MAX, TILT_MIN, ZOOM_MAX10, ZOOM_MIN10
 from pirl.env import make_vec_env
 from pirl.world import dynamics as D
-from pirl.world.config import PAN_MAX, PAN_MIN, TILT_MAX, TILT_MIN, ZOOM_MAX10, ZOOM_MIN10
 
 SMALL = {"size": (6, 6, 3), "max_steps": 40, "scale_by_alpha": False, "battery_capacity": 30.0}
 

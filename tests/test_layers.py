@@ -19,6 +19,7 @@ PACKAGE = SRC / "pirl"
 # step with docs/architecture.md.
 LAYERS = (
     ("pirl", "pirl._numba_cache"),  # the package root: numba cache set-up, env registration
+    ("pirl.config",),  # the action grid and the settings every layer reads
     # Grid, scenarios, footprints, rules, metrics, planning queries. physics.config is plain
     # settings (it imports world.config only), so the run config of agents may hold it.
     ("pirl.world", "pirl.physics.config"),

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.parser import parse_recommendation
 from pirl.advice.prompt import STATE_MARKER
+from pirl.config import grid
 
 if TYPE_CHECKING:  # pragma: no cover
     import torch
@@ -235,11 +236,17 @@ _VALUE_CHARS = frozenset(" -.0123456789")
 
 def _field_values() -> list[tuple[str, list[str]]]:
     """Each field's key literal and the complete value strings the model may write."""
-    zoom = [f"{k / 10:.1f}" for k in range(5, 21)] + ["1", "2"]
-    move = ["-1", "0", "1"]
+    # Any whole degree within the limits (the parser snaps to the grid); zoom in tenths.
+    zoom = [f"{z:.1f}" for z in grid.zoom_steps()] + [
+        str(int(z)) for z in grid.zoom_steps() if z == int(z)
+    ]
+    move = [str(v) for v in grid.MOVE_VALUES]
     return [
-        ("", [str(v) for v in range(-90, 91)]),  # pan: its key is the prefill
-        (", tilt:", [str(v) for v in range(0, 91)]),
+        (
+            "",
+            [str(v) for v in range(grid.PAN_MIN, grid.PAN_MAX + 1)],
+        ),  # pan: the prefill is its key
+        (", tilt:", [str(v) for v in range(grid.TILT_MIN, grid.TILT_MAX + 1)]),
         (", zoom:", zoom),
         (", X:", move),
         (", Y:", move),

@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from pirl.advice.recommendation import FORMAT_EXAMPLE, PAN_RANGE, TILT_RANGE, ZOOM_RANGE
+from pirl.advice.recommendation import FORMAT_EXAMPLE
+from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE
 
 __all__ = [
     "FOOTPRINTS",

@@ -6,14 +6,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-PAN_RANGE: tuple[float, float] = (-90.0, 90.0)
-"""Allowed pan, degrees (0 = +x, world frame)."""
-TILT_RANGE: tuple[float, float] = (0.0, 90.0)
-"""Allowed tilt, degrees (0 = forward, 90 = straight down)."""
-ZOOM_RANGE: tuple[float, float] = (0.5, 2.0)
-"""Allowed zoom factor."""
-MOVE_VALUES: tuple[int, int, int] = (-1, 0, 1)
-"""Allowed values of each move component dx, dy, dz."""
+from pirl.config.grid import MOVE_VALUES, PAN_RANGE, TILT_RANGE, ZOOM_RANGE
 
 FORMAT_EXAMPLE = "pan: 75, tilt: 45, zoom: 1.0, X: -1, Y: 0, Z: 0"
 """An answer in the exact output format (the paper's sample values)."""

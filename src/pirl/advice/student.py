@@ -43,18 +43,19 @@ from torch import nn
 from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
+from pirl.config import grid
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
 FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
 """The six fields of a recommendation, in the student's head order."""
 CLASSES: tuple[np.ndarray, ...] = (
-    np.arange(-90.0, 91.0, 15.0),  # pan
-    np.arange(0.0, 91.0, 5.0),  # tilt
-    np.round(np.arange(5, 21) / 10.0, 1),  # zoom
-    np.array([-1.0, 0.0, 1.0]),  # dx
-    np.array([-1.0, 0.0, 1.0]),  # dy
-    np.array([-1.0, 0.0, 1.0]),  # dz
+    np.array(grid.pan_steps(), dtype=np.float64),
+    np.array(grid.tilt_steps(), dtype=np.float64),
+    np.array(grid.zoom_steps(), dtype=np.float64),
+    np.array(grid.MOVE_VALUES, dtype=np.float64),  # dx
+    np.array(grid.MOVE_VALUES, dtype=np.float64),  # dy
+    np.array(grid.MOVE_VALUES, dtype=np.float64),  # dz
 )
 """The allowed values of each field (the camera grid of the world and the one-cell moves)."""
 N_EXTRA = 6

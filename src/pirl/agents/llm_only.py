@@ -18,6 +18,7 @@ from pirl.advice.base import Advisor
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.state import advice_requests
 from pirl.agents.policy import Policy, hold_action
+from pirl.config import grid as g
 from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
@@ -33,13 +34,16 @@ def _snap(value: float, step: float, low: float, high: float) -> float:
 def action_queue(camera: tuple[int, int, int], rec: Recommendation) -> list[int]:
     """Atomic actions for one recommendation from ``camera`` = (tilt, pan, zoom10)."""
     tilt, pan, zoom10 = camera
-    want_tilt = int(_snap(rec.tilt, 5, 0, 90))
-    want_pan = int(_snap(rec.pan, 15, -90, 90))
-    want_zoom = round(_snap(rec.zoom * 10, 1, 5, 20))
+    want_tilt = int(_snap(rec.tilt, g.TILT_STEP, g.TILT_MIN, g.TILT_MAX))
+    want_pan = int(_snap(rec.pan, g.PAN_STEP, g.PAN_MIN, g.PAN_MAX))
+    want_zoom = round(_snap(rec.zoom * 10, g.ZOOM_STEP10, g.ZOOM_MIN10, g.ZOOM_MAX10))
     queue: list[int] = []
-    queue += [D.TILT_PLUS if want_tilt > tilt else D.TILT_MINUS] * (abs(want_tilt - tilt) // 5)
-    queue += [D.PAN_PLUS if want_pan > pan else D.PAN_MINUS] * (abs(want_pan - pan) // 15)
-    queue += [D.ZOOM_PLUS if want_zoom > zoom10 else D.ZOOM_MINUS] * abs(want_zoom - zoom10)
+    tilts = abs(want_tilt - tilt) // g.TILT_STEP
+    pans = abs(want_pan - pan) // g.PAN_STEP
+    zooms = abs(want_zoom - zoom10) // g.ZOOM_STEP10
+    queue += [D.TILT_PLUS if want_tilt > tilt else D.TILT_MINUS] * tilts
+    queue += [D.PAN_PLUS if want_pan > pan else D.PAN_MINUS] * pans
+    queue += [D.ZOOM_PLUS if want_zoom > zoom10 else D.ZOOM_MINUS] * zooms
     for axis, delta in enumerate((rec.dx, rec.dy, rec.dz)):
         if delta:
             queue.append(_MOVE_ACTIONS[axis][0 if delta > 0 else 1])

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.config import grid as g
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
@@ -55,8 +56,9 @@ def hold_action(camera: tuple[int, int, int]) -> int:
     """
     tilt, pan, zoom10 = camera
     for at_limit, action in (
-        (tilt == 90, D.TILT_PLUS), (tilt == 0, D.TILT_MINUS), (pan == 90, D.PAN_PLUS),
-        (pan == -90, D.PAN_MINUS), (zoom10 == 20, D.ZOOM_PLUS), (zoom10 == 5, D.ZOOM_MINUS),
+        (tilt == g.TILT_MAX, D.TILT_PLUS), (tilt == g.TILT_MIN, D.TILT_MINUS),
+        (pan == g.PAN_MAX, D.PAN_PLUS), (pan == g.PAN_MIN, D.PAN_MINUS),
+        (zoom10 == g.ZOOM_MAX10, D.ZOOM_PLUS), (zoom10 == g.ZOOM_MIN10, D.ZOOM_MINUS),
     ):  # fmt: skip
         if at_limit:
             return action

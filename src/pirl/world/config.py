@@ -16,10 +16,16 @@ from typing import Any
 
 import yaml
 
-# The camera grid (DESIGN.md section 3). Zoom is stored in tenths to avoid float drift.
-TILT_MIN, TILT_MAX, TILT_STEP = 0, 90, 5
-PAN_MIN, PAN_MAX, PAN_STEP = -90, 90, 15
-ZOOM_MIN10, ZOOM_MAX10, ZOOM_STEP10 = 5, 20, 1
+from pirl.config.grid import (
+    PAN_MAX,
+    PAN_MIN,
+    PAN_STEP,
+    TILT_MAX,
+    TILT_MIN,
+    TILT_STEP,
+    ZOOM_MAX10,
+    ZOOM_MIN10,
+)
 
 # The training world the paper scales from.
 BASE_SIZE = (15, 15, 3)

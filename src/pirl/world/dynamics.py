@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from pirl.world.config import (
+from pirl.config.grid import (
     PAN_MAX,
     PAN_MIN,
     PAN_STEP,
