@@ -67,6 +67,10 @@ class TrainSettings:
     """Write a resumable checkpoint at the first rollout boundary after every this many steps."""
     log_every_s: float = 10.0
     """Seconds between plain progress lines when the output is not a terminal."""
+    camera_start: str = "fixed"
+    """Training episodes start with the camera at the env's start pose ('fixed', the paper) or
+    at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
+    wide footprints it would not find by chance). Evaluation always starts at the env's pose."""
 
 
 @dataclass(frozen=True)
@@ -334,6 +338,10 @@ def _validate(cfg: RunConfig) -> None:
     for key, value in positive.items():
         if value <= 0:
             raise ConfigError(f"{key}={value!r}: must be > 0")
+    if t.camera_start not in ("fixed", "random"):
+        raise ConfigError(
+            f"train.camera_start={t.camera_start!r}: allowed values are fixed, random"
+        )
     choices = {
         "ppo.lr_schedule": (p.lr_schedule, ("constant", "linear")),
         "ppo.device": (p.device, ("auto", "cpu", "cuda")),

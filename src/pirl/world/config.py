@@ -121,6 +121,10 @@ class VCPPConfig:
     """Camera pan at reset, degrees (0 = +x), multiple of 15 in [-90, 90]."""
     start_zoom: float = 1.0
     """Camera zoom at reset, on the grid 0.5, 0.6, ..., 2.0."""
+    start_camera: str = "fixed"
+    """'fixed': every episode starts with the camera at start_tilt/pan/zoom (the paper). 'random':
+    each scenario also draws its starting camera pose uniformly on the grid (exploring starts;
+    training only: ``train.camera_start``)."""
     reward: str = "static"
     """Reward weights: 'static' (PPO-SR) or 'ewri' (re-drawn at every reset)."""
     static_weights: tuple[float, ...] = STATIC_WEIGHTS
@@ -312,6 +316,7 @@ def _validate(cfg: VCPPConfig) -> None:
     if cfg.start_pan % PAN_STEP or not PAN_MIN <= cfg.start_pan <= PAN_MAX:
         raise ConfigError(f"start_pan={cfg.start_pan!r}: allowed values are -90, -75, ..., 90")
     zoom_to_tenths(cfg.start_zoom, "start_zoom")
+    _choice(cfg, "start_camera", ("fixed", "random"))
     if len(cfg.static_weights) != len(REWARD_TERMS) or not all(
         isinstance(w, int | float) for w in cfg.static_weights
     ):
