@@ -34,22 +34,30 @@ from pirl.evaluate.summary import interval_estimates
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# name -> overrides of the profile (sections env and ppo); every variant trains the same runs.
+# name -> overrides of the profile (sections env, ppo, train); every variant trains the same runs.
 PAPER_OBS = {"obs_visits": False, "obs_target": False}
 MEMORY = {"obs_visits": True, "obs_target": True}
+FIXED = {"camera_start": "fixed"}  # training starts at the paper's camera pose
 VARIANTS: dict[str, dict[str, dict]] = {
-    "unmasked": {"ppo": {"action_masking": False}, "env": PAPER_OBS},
-    "masked": {"ppo": {"action_masking": True}, "env": PAPER_OBS},
-    "masked-memory": {"ppo": {"action_masking": True}, "env": MEMORY},
-    "masked-visits": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_visits": True}},
-    "masked-target": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_target": True}},
+    "unmasked": {"ppo": {"action_masking": False}, "env": PAPER_OBS, "train": FIXED},
+    "masked": {"ppo": {"action_masking": True}, "env": PAPER_OBS, "train": FIXED},
+    "masked-memory": {"ppo": {"action_masking": True}, "env": MEMORY, "train": FIXED},
+    "masked-visits": {
+        "ppo": {"action_masking": True},
+        "env": {**PAPER_OBS, "obs_visits": True},
+        "train": FIXED,
+    },
+    "masked-target": {
+        "ppo": {"action_masking": True},
+        "env": {**PAPER_OBS, "obs_target": True},
+        "train": FIXED,
+    },
     # Exploring starts: training episodes begin at a random camera pose (evaluation never does).
     "masked-memory-explore": {
         "ppo": {"action_masking": True},
         "env": MEMORY,
         "train": {"camera_start": "random"},
     },
-    "masked-memory-ent03": {"ppo": {"action_masking": True, "ent_coef": 0.03}, "env": MEMORY},
 }
 
 

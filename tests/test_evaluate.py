@@ -224,3 +224,4 @@ def test_report_settings_line_says_masked_or_not():
     paper = settings_line(RunConfig.from_yaml(root / "paper.yaml"))
     assert "valid-action masks" in quick and "visit counts" in quick
     assert "no action masks" in paper and "the paper's observation" in paper
+    assert "random camera poses" in quick and "camera poses" not in paper

@@ -524,7 +524,12 @@ def settings_line(cfg: RunConfig) -> str:
         if blocks
         else "the paper's observation"
     )
-    return f"Agents: {masks}; {seen} (docs/deviations.md)."
+    starts = (
+        "; training episodes start at random camera poses (evaluation at the paper's)"
+        if cfg.train.camera_start == "random"
+        else ""
+    )
+    return f"Agents: {masks}; {seen}{starts} (docs/deviations.md)."
 
 
 def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
