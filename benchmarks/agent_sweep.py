@@ -43,6 +43,13 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory": {"ppo": {"action_masking": True}, "env": MEMORY},
     "masked-visits": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_visits": True}},
     "masked-target": {"ppo": {"action_masking": True}, "env": {**PAPER_OBS, "obs_target": True}},
+    # Exploring starts: training episodes begin at a random camera pose (evaluation never does).
+    "masked-memory-explore": {
+        "ppo": {"action_masking": True},
+        "env": MEMORY,
+        "train": {"camera_start": "random"},
+    },
+    "masked-memory-ent03": {"ppo": {"action_masking": True, "ent_coef": 0.03}, "env": MEMORY},
 }
 
 

@@ -58,7 +58,9 @@ def env_config_for(method: str, cfg: RunConfig) -> VCPPConfig:
     if method not in PPO_METHODS:
         raise ConfigError(f"method {method!r}: PPO methods are {', '.join(PPO_METHODS)}")
     reward = "static" if method == "ppo-sr" else "ewri"
-    return cfg.env.replace(reward=reward, llm_weight=method == "pirl")
+    return cfg.env.replace(
+        reward=reward, llm_weight=method == "pirl", start_camera=cfg.train.camera_start
+    )
 
 
 # -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------

@@ -80,10 +80,15 @@ class TrainSettings(Settings, section="train"):
     """Write a resumable checkpoint at the first rollout boundary after every this many steps."""
     log_every_s: float = 10.0
     """Seconds between plain progress lines when the output is not a terminal."""
+    camera_start: str = "fixed"
+    """Training episodes start with the camera at the env's start pose ('fixed', the paper) or
+    at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
+    wide footprints it would not find by chance). Evaluation always starts at the env's pose."""
 
     def validate(self) -> None:
-        """A positive length and checkpoint interval."""
+        """A positive length and checkpoint interval, a known camera start."""
         self.require_positive("total_steps", "checkpoint_every")
+        self.require_choice("camera_start", ("fixed", "random"))
 
 
 @dataclass(frozen=True)

@@ -110,6 +110,10 @@ class VCPPConfig(Settings, section="env"):
     """Camera pan at reset, degrees (0 = +x), multiple of 15 in [-90, 90]."""
     start_zoom: float = 1.0
     """Camera zoom at reset, on the grid 0.5, 0.6, ..., 2.0."""
+    start_camera: str = "fixed"
+    """'fixed': every episode starts with the camera at start_tilt/pan/zoom (the paper). 'random':
+    each scenario also draws its starting camera pose uniformly on the grid (exploring starts;
+    training only: ``train.camera_start``)."""
     reward: str = "static"
     """Reward weights: 'static' (PPO-SR) or 'ewri' (re-drawn at every reset)."""
     static_weights: tuple[float, ...] = STATIC_WEIGHTS
@@ -181,6 +185,7 @@ class VCPPConfig(Settings, section="env"):
         if self.start_pan % PAN_STEP or not PAN_MIN <= self.start_pan <= PAN_MAX:
             raise self.refuse("start_pan", "allowed values are -90, -75, ..., 90")
         zoom_to_tenths(self.start_zoom, self.where("start_zoom"))
+        self.require_choice("start_camera", ("fixed", "random"))
         if len(self.static_weights) != len(REWARD_TERMS):
             raise self.refuse(
                 "static_weights",

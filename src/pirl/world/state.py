@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
@@ -29,6 +30,8 @@ class Scenario:
     obstacles: np.ndarray  # (n, 4): cx, cy, cz, radius in cell units
     start: tuple[int, int, int]
     wind_seed: int
+    camera: tuple[int, int, int] | None = None
+    """Starting (tilt, pan, zoom tenths) if drawn (``start_camera: random``); else the config's."""
 
 
 @numba.njit(cache=True)
@@ -69,7 +72,15 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
         if free.size and not blocked[:, :, 0].all():
             start = np.unravel_index(free[int(rng.integers(free.size))], cfg.size)
             wind_seed = int(rng.integers(0, 2**63 - 1))
-            return Scenario(obstacles, (int(start[0]), int(start[1]), int(start[2])), wind_seed)
+            camera = None
+            if cfg.start_camera == "random":  # drawn last: fixed-start scenarios stay the same
+                camera = (
+                    int(rng.choice(grid.tilt_steps())),
+                    int(rng.choice(grid.pan_steps())),
+                    int(rng.integers(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1)),
+                )
+            start_cell = (int(start[0]), int(start[1]), int(start[2]))
+            return Scenario(obstacles, start_cell, wind_seed, camera)
     raise ConfigError(
         f"size={cfg.size}: could not place {lo}-{hi} obstacles of radius "
         f"{cfg.radius_min}-{cfg.radius_max} and keep a free cell and coverable ground; "
@@ -180,7 +191,8 @@ class WorldBatch:
         row = self.ints[e]
         row[:] = 0
         row[D.PX], row[D.PY], row[D.PZ] = start
-        row[D.TILT], row[D.PAN], row[D.ZOOM] = cfg.start_tilt, cfg.start_pan, cfg.start_zoom10
+        camera = scenario.camera or (cfg.start_tilt, cfg.start_pan, cfg.start_zoom10)
+        row[D.TILT], row[D.PAN], row[D.ZOOM] = camera
         row[D.N_OBS] = n
         self.energy[e] = self.capacity
         self.rng[e] = np.uint64(scenario.wind_seed)

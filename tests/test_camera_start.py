@@ -1,0 +1,44 @@
+"""Exploring starts: a training option that draws the starting camera pose per scenario."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pirl.agents.train import env_config_for
+from pirl.config import grid
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
+from pirl.config.world import VCPPConfig
+from pirl.world.state import draw_scenario
+
+
+def test_fixed_start_draws_the_same_scenarios_as_before() -> None:
+    """The random pose is drawn last, so fixed-start scenarios (every evaluation) are unchanged."""
+    fixed = draw_scenario(VCPPConfig(), np.random.default_rng(7))
+    drawn = draw_scenario(VCPPConfig(start_camera="random"), np.random.default_rng(7))
+    assert fixed.camera is None
+    assert fixed.start == drawn.start and fixed.wind_seed == drawn.wind_seed
+    np.testing.assert_array_equal(fixed.obstacles, drawn.obstacles)
+
+
+def test_random_start_covers_the_camera_grid() -> None:
+    cfg = VCPPConfig(start_camera="random")
+    rng = np.random.default_rng(0)
+    poses = {draw_scenario(cfg, rng).camera for _ in range(400)}
+    tilts, pans, zooms = (sorted({p[k] for p in poses}) for k in range(3))
+    assert tilts == list(grid.tilt_steps()) and pans == list(grid.pan_steps())
+    assert zooms == list(range(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1))
+
+
+def test_camera_start_reaches_the_training_env_only() -> None:
+    cfg = RunConfig.from_dict({"train": {"camera_start": "random"}})
+    assert env_config_for("ppo-ewri", cfg).start_camera == "random"
+    assert cfg.env.start_camera == "fixed"  # what every evaluation of the run builds on
+
+
+def test_unknown_camera_start_is_one_line() -> None:
+    with pytest.raises(ConfigError, match="train.camera_start='sometimes'"):
+        RunConfig.from_dict({"train": {"camera_start": "sometimes"}})
+    with pytest.raises(ConfigError, match="start_camera"):
+        VCPPConfig(start_camera="sometimes")
