@@ -19,7 +19,7 @@ import difflib
 import functools
 import types
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Self
 
@@ -42,17 +42,17 @@ class Settings:
         cls.section = section
 
     def __post_init__(self) -> None:
-        hints = _hints(type(self))
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
-            value = getattr(self, f.name)
+        for name, hint, settle in _plan(type(self)):
+            value = getattr(self, name)
             try:
-                settled = _settle(hints[f.name], value)
+                settled = settle(value)
             except _Mismatch:
                 raise ConfigError(
-                    f"{self.where(f.name)}={value!r}: expected {_describe(hints[f.name])}"
+                    f"{self.where(name)}={value!r}: expected {_describe(hint)}"
                 ) from None
-            # Frozen: the dataclass itself refuses plain assignment.
-            object.__setattr__(self, f.name, settled)
+            if settled is not value:
+                # Frozen: the dataclass itself refuses plain assignment.
+                object.__setattr__(self, name, settled)
         self.validate()
 
     def validate(self) -> None:
@@ -145,47 +145,86 @@ class _Mismatch(Exception):
 
 
 @functools.cache
-def _hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
+def _plan(cls: type) -> tuple[tuple[str, Any, Callable[[Any], Any]], ...]:
+    """(name, type hint, settler) of every field of a section, in field order."""
+    hints = typing.get_type_hints(cls)
+    return tuple(
+        (f.name, hints[f.name], _settler(hints[f.name]))
+        for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+    )
 
 
 def _is_section(hint: Any) -> bool:
     return isinstance(hint, type) and issubclass(hint, Settings)
 
 
-def _settle(hint: Any, value: Any) -> Any:
-    """``value`` as ``hint`` holds it (lists as tuples, a mapping as its section)."""
+@functools.cache
+def _settler(hint: Any) -> Callable[[Any], Any]:
+    """The function that returns a value as ``hint`` holds it (lists as tuples, a mapping as
+    its section) or raises _Mismatch; built once per hint, as configs are built often (every
+    env, every evaluation job)."""
+    if hint in _PLAIN:
+        kinds = _PLAIN[hint]
+
+        def plain(value: Any) -> Any:
+            # bool is an int to Python, never to a config: true is no step count.
+            if not isinstance(value, kinds) or (isinstance(value, bool) and hint is not bool):
+                raise _Mismatch
+            return value
+
+        return plain
     if hint is Any:
-        return value
+        return lambda value: value
+    if hint is type(None):
+
+        def none(value: Any) -> Any:
+            if value is not None:
+                raise _Mismatch
+            return value
+
+        return none
     if _is_section(hint):
-        return value if isinstance(value, hint) else hint.from_dict(value)
+        return lambda value: value if isinstance(value, hint) else hint.from_dict(value)
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if origin in (types.UnionType, typing.Union):
-        for arm in args:
-            try:
-                return _settle(arm, value)
-            except _Mismatch:
-                continue
-        raise _Mismatch
+        arms = [_settler(a) for a in args]
+
+        def union(value: Any) -> Any:
+            for arm in arms:
+                try:
+                    return arm(value)
+                except _Mismatch:
+                    continue
+            raise _Mismatch
+
+        return union
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        each = _settler(args[0])
+
+        def many(value: Any) -> Any:
+            if not isinstance(value, list | tuple):
+                raise _Mismatch
+            return tuple(each(v) for v in value)
+
+        return many
     if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise _Mismatch
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_settle(args[0], v) for v in value)
-        if len(value) != len(args):
-            raise _Mismatch
-        return tuple(_settle(a, v) for a, v in zip(args, value, strict=True))
-    if hint is type(None):
-        if value is not None:
-            raise _Mismatch
-        return value
-    # bool is an int to Python, never to a config: true is no step count.
-    if isinstance(value, bool) and hint is not bool:
-        raise _Mismatch
-    ok = isinstance(value, int | float) if hint is float else isinstance(value, hint)
-    if not ok:
-        raise _Mismatch
-    return value
+        parts = [_settler(a) for a in args]
+
+        def fixed(value: Any) -> Any:
+            if not isinstance(value, list | tuple) or len(value) != len(parts):
+                raise _Mismatch
+            return tuple(part(v) for part, v in zip(parts, value, strict=True))
+
+        return fixed
+    raise TypeError(f"no config rule for the type hint {hint!r}")
+
+
+_PLAIN: dict[Any, type | tuple[type, ...]] = {
+    bool: bool,
+    int: int,
+    float: (int, float),  # an integer is a fine number: YAML writes 50, not 50.0
+    str: str,
+}
 
 
 _NAMES: dict[Any, tuple[str, str]] = {

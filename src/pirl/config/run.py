@@ -313,7 +313,8 @@ class RunConfig(Settings):
 
 
 def _check_names(cfg: RunConfig) -> None:
-    """Names of advisors compared as strings (a registry lookup replaces this)."""
+    """The advisor name, checked against a list of names (kept apart from the section rules
+    so that a registry of advisors can take this check over whole)."""
     pare = cfg.pare
     choices = {
         "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
