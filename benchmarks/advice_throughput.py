@@ -111,8 +111,8 @@ def _train_forever(out: str, seed: int) -> None:
     ``pirl reproduce`` runs two beside the teacher."""
     import torch
 
-    from pirl.agents.config import RunConfig
     from pirl.agents.train import train
+    from pirl.config.run import RunConfig
 
     torch.set_num_threads(1)
     root = Path(__file__).resolve().parents[1]

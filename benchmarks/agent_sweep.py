@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_policy
+from pirl.config.run import RunConfig
 from pirl.evaluate.reproduce import train_all
 from pirl.evaluate.rollout import run_batch, run_episode
 from pirl.evaluate.scenarios import parse_size, scenario_seeds, size_name, validation_seeds

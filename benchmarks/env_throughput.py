@@ -34,9 +34,9 @@ import gymnasium as gym
 import numpy as np
 
 import pirl  # noqa: F401  (registers pirl/VCPP-v0)
+from pirl.config.world import VCPPConfig
 from pirl.env import VCPPEnv, VCPPVectorEnv, make_vec_env
 from pirl.env.core import EnvCore
-from pirl.world.config import VCPPConfig
 
 
 def rate(step: Callable[[int], object], per_call: int, seconds: float) -> float:

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from pirl.agents.config import RunConfig
+from pirl.config.run import RunConfig
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
 from pirl.evaluate.scenarios import parse_size
 

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_policy
+from pirl.config.run import RunConfig
 from pirl.evaluate.reproduce import train_all
 from pirl.evaluate.rollout import run_batch
 from pirl.evaluate.scenarios import parse_size, size_name, validation_seeds

@@ -24,12 +24,13 @@ from collections import defaultdict
 import numpy as np
 
 from pirl.agents.loading import load_policy
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds
-from pirl.physics import Mission, PhysicsConfig
+from pirl.physics import Mission
 from pirl.physics.mission import MOVE, normalized_power
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 from pirl.world.state import Scenario
 
 UNCAPPED = 1e6  # max_thrust_to_weight that never caps: the energy model before the cap

@@ -19,9 +19,10 @@ from pathlib import Path
 
 from pirl.agents.loading import load_policy
 from pirl.agents.policy import Policy, RandomPolicy
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds
-from pirl.physics import PhysicsConfig, run_physics_episode
-from pirl.world.config import VCPPConfig
+from pirl.physics import run_physics_episode
 
 
 def make_policy(name: str, seed: int) -> Policy:

@@ -31,9 +31,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecMonitor
 
 from pirl.advice.factory import make_advisor
-from pirl.agents.config import RunConfig
 from pirl.agents.pirl_advice import build_pirl_advice
 from pirl.agents.train import build_env_stack, build_ppo
+from pirl.config.run import RunConfig
 from pirl.env import VCPPEnv, make_vec_env
 
 

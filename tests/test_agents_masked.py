@@ -11,10 +11,10 @@ import pytest
 import torch
 from sb3_contrib import MaskablePPO
 
-from pirl.agents.config import RunConfig
 from pirl.agents.imitation import collect_expert, load_expert
 from pirl.agents.loading import load_policy, mask_probabilities, run_masked
 from pirl.agents.train import train
+from pirl.config.run import RunConfig
 from pirl.env.vcpp_env import VCPPEnv
 from pirl.evaluate.rollout import run_batch, run_episode
 

@@ -10,15 +10,15 @@ import pytest
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.oracle import OracleAdvisor
 from pirl.advice.recommendation import Recommendation
-from pirl.agents.config import RunConfig
 from pirl.agents.imitation import train_il
 from pirl.agents.llm_only import LLMOnlyPolicy, action_queue
 from pirl.agents.loading import PPOPolicy, TabNetPolicy, load_policy
 from pirl.agents.policy import hold_action
 from pirl.agents.train import train
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
 from pirl.env import VCPPEnv
 from pirl.evaluate import run_episode
-from pirl.world.config import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 

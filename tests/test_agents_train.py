@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_model
 from pirl.agents.train import train
-from pirl.world.config import ConfigError
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pirl.agents.config import RunConfig
 from pirl.agents.train import env_config_for
 from pirl.config import grid
-from pirl.world.config import ConfigError, VCPPConfig
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
+from pirl.config.world import VCPPConfig
 from pirl.world.state import draw_scenario
 
 

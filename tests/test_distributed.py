@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from pirl.agents.config import RunConfig
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
 from pirl.evaluate.distributed import ray_executor
 from pirl.evaluate.reproduce import train_all
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin
-from pirl.world.config import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,9 +10,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from pirl.config.world import REWARD_TERMS
 from pirl.env import make_vec_env
 from pirl.env.info import INFO_KEYS, LazyInfo
-from pirl.world.config import REWARD_TERMS
 
 SETTINGS = {"size": (10, 10, 3), "wind_prob": 0.0}
 

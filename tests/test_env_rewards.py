@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import scenario
-from pirl.world.config import EWRI_RANGES, REWARD_TERMS, STATIC_WEIGHTS
+from pirl.config.world import EWRI_RANGES, REWARD_TERMS, STATIC_WEIGHTS
 
 STATIC = dict(zip(REWARD_TERMS, STATIC_WEIGHTS, strict=True))
 RANGES = dict(zip(REWARD_TERMS, EWRI_RANGES, strict=True))

@@ -7,10 +7,10 @@ import math
 
 import pytest
 
+from pirl.config.errors import ConfigError
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.evaluate.summary import mean_ci95, read_summary, summarize
-from pirl.world.config import ConfigError
 
 
 def test_parse_size():
@@ -93,8 +93,8 @@ def trained_runs(tmp_path_factory):
     """Two tiny PPO-EWRI runs (seeds 0 and 1) on the test preset."""
     from pathlib import Path
 
-    from pirl.agents.config import RunConfig
     from pirl.agents.runs import train_one
+    from pirl.config.run import RunConfig
 
     root = tmp_path_factory.mktemp("runs")
     cfg = RunConfig.from_yaml(Path(__file__).resolve().parents[1] / "configs" / "test.yaml")
@@ -216,7 +216,7 @@ def test_camera_table_gives_steps_relative_to_the_planner():
 def test_report_settings_line_says_masked_or_not():
     from pathlib import Path
 
-    from pirl.agents.config import RunConfig
+    from pirl.config.run import RunConfig
     from pirl.evaluate.reproduce import settings_line
 
     root = Path(__file__).resolve().parents[1] / "configs"

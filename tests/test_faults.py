@@ -467,10 +467,10 @@ def test_meta_steps_csv_line_endings_n_updates_and_the_differing_setting(tmp_pat
     import shutil
     import zipfile
 
-    from pirl.agents.config import RunConfig
     from pirl.agents.train import train
+    from pirl.config.errors import ConfigError
+    from pirl.config.run import RunConfig
     from pirl.evaluate.runner import distinct_specs, spec_for_run
-    from pirl.world.config import ConfigError
 
     cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"total_steps": 1500})
     run = tmp_path / "run"

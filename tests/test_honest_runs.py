@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from pirl.agents.config import RunConfig
 from pirl.agents.pirl_advice import build_pirl_advice, shaped_share, unshaped_warning
 from pirl.agents.train import train
+from pirl.config.run import RunConfig
 from pirl.evaluate.report import write_report
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.summary import honest_label

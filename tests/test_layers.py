@@ -19,10 +19,8 @@ PACKAGE = SRC / "pirl"
 # step with docs/architecture.md.
 LAYERS = (
     ("pirl", "pirl._numba_cache"),  # the package root: numba cache set-up, env registration
-    ("pirl.config",),  # the action grid and the settings every layer reads
-    # Grid, scenarios, footprints, rules, metrics, planning queries. physics.config is plain
-    # settings (it imports world.config only), so the run config of agents may hold it.
-    ("pirl.world", "pirl.physics.config"),
+    ("pirl.config",),  # the action grid, the errors and every settings section
+    ("pirl.world",),  # grid, scenarios, footprints, rules, metrics, planning queries
     ("pirl.env",),  # Gymnasium / SB3 environments over the world
     ("pirl.advice",),  # prompts, advisors, parsing, cache, budget
     ("pirl.pare",),  # reward shaping with advice

@@ -26,14 +26,14 @@ from pirl.advice.student import (
     student_features,
     teacher_key,
 )
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_model
 from pirl.agents.pirl_advice import build_pirl_advice, pirl_label
 from pirl.agents.train import TrainingStopped, train
+from pirl.config.errors import UserError
+from pirl.config.run import RunConfig
 from pirl.env import make_vec_env
 from pirl.env.observation import obs_size
 from pirl.pare.wrapper import AdvisorFailing, PAREVecEnv
-from pirl.world.config import UserError
 from test_pare_wrapper import SlowOracle  # the real oracle with an LLM's latency
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,11 +10,11 @@ import pytest
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.oracle import OracleAdvisor
 from pirl.advice.recommendation import Recommendation
+from pirl.config.errors import ConfigError
 from pirl.env import make_vec_env
 from pirl.env.rewards import LLM_INDEX
 from pirl.pare import alignment, f_llm
 from pirl.pare.wrapper import PAREVecEnv
-from pirl.world.config import ConfigError
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
 

@@ -16,16 +16,18 @@ from typer.testing import CliRunner
 from conftest import scenario
 from pirl.agents.policy import Policy, RandomPolicy
 from pirl.cli import app
+from pirl.config.errors import ConfigError
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.env.vcpp_env import VCPPEnv
 from pirl.evaluate.rollout import run_episode
-from pirl.physics import Mission, PhysicsConfig, Pose, run_physics_episode
+from pirl.physics import Mission, Pose, run_physics_episode
 from pirl.physics.coverage import view_angles
 from pirl.physics.mission import CAMERA, ENERGY_CAUSES, MOVE, REFUSED, normalized_power, touching
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.physics.webots.controller import mission_from_args, parse_args
 from pirl.physics.webots.pilot import MavicPilot
 from pirl.physics.webots.world import world_text, write_world
-from pirl.world.config import ConfigError, VCPPConfig
 from pirl.world.state import WorldBatch
 
 CALM = PhysicsConfig(wind_mean=(0.0, 0.0, 0.0), wind_gust=0.0)

@@ -20,13 +20,13 @@ import torch
 import yaml
 
 from pirl.agents import checkpoint
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_model
 from pirl.agents.train import Progress, train
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
 from pirl.evaluate import runner
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
 from pirl.evaluate.summary import read_summary
-from pirl.world.config import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
@@ -362,7 +362,7 @@ def test_small_cli_outputs(tmp_path):
 
 def test_il_resume_refuses_another_method_or_seed(tmp_path):
     from pirl.agents.imitation import train_il
-    from pirl.world.config import UserError
+    from pirl.config.errors import UserError
 
     cfg = RunConfig.from_yaml(TEST_CFG)
     run = tmp_path / "il"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pirl.agents.config import RunConfig
+from pirl.config.run import RunConfig
 from pirl.evaluate.reproduce import reproduce
 
 ROOT = Path(__file__).resolve().parents[1]

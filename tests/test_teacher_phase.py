@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from pirl.agents.config import RunConfig
 from pirl.agents.teacher_phase import phase_of
+from pirl.config.run import RunConfig
 from pirl.evaluate.reproduce import describe_plan, teacher_phases, train_all
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,14 +6,9 @@ import gymnasium as gym
 import pytest
 import yaml
 
+from pirl.config.errors import ConfigError
+from pirl.config.world import EWRI_RANGES, REWARD_TERMS, STATIC_WEIGHTS, VCPPConfig
 from pirl.env import VCPPEnv, make_vec_env
-from pirl.world.config import (
-    EWRI_RANGES,
-    REWARD_TERMS,
-    STATIC_WEIGHTS,
-    ConfigError,
-    VCPPConfig,
-)
 
 
 def test_defaults_match_the_design():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import scenario
+from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import blocked_grid, draw_scenario
 

@@ -13,7 +13,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from pirl.world.config import ConfigError, UserError, VCPPConfig
+from pirl.config.errors import ConfigError, UserError
+from pirl.config.world import VCPPConfig
 
 app = typer.Typer(
     add_completion=False,
@@ -201,7 +202,7 @@ def reproduce(
     """Train every method not yet trained in --out, evaluate all of them, write the report."""
     from rich.progress import Progress
 
-    from pirl.agents.config import RunConfig
+    from pirl.config.run import RunConfig
     from pirl.evaluate.reproduce import reproduce as run_reproduce
 
     path = _preset(config, "--config") if config else _preset(profile)
@@ -323,9 +324,9 @@ def train(
     ] = None,
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
-    from pirl.agents.config import RunConfig
     from pirl.agents.train import TrainingInterrupted, TrainingStopped
     from pirl.agents.train import train as run_training
+    from pirl.config.run import RunConfig
 
     own = out / "config.yaml"
     if resume and config is None and own.is_file():
@@ -389,8 +390,8 @@ def distill(
     """Distil a teacher advisor into a student offline (for pirl train --student)."""
     from rich.progress import Progress
 
-    from pirl.agents.config import RunConfig
     from pirl.agents.distill import distill as run_distill
+    from pirl.config.run import RunConfig
 
     cfg = RunConfig.from_yaml(_preset(config, "--config"))
     if teacher == "openai":
@@ -464,8 +465,8 @@ def evaluate(
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
 
-    from pirl.agents.config import RunConfig
     from pirl.agents.run_folder import folder_contents, folder_lock
+    from pirl.config.run import RunConfig
     from pirl.evaluate.runner import EvalPlan, parse_acts, spec_for_builtin, spec_for_run
     from pirl.evaluate.runner import evaluate as run_evaluation
     from pirl.evaluate.scenarios import parse_size
@@ -626,7 +627,7 @@ def advise(
 
     from pirl.advice.factory import make_advisor
     from pirl.advice.state import advice_requests
-    from pirl.agents.config import RunConfig
+    from pirl.config.run import RunConfig
     from pirl.env import VCPPEnv
 
     cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
@@ -741,7 +742,7 @@ def webots_world(
     ] = True,
 ) -> None:
     """Write a Webots world of one scenario (Mavic 2 Pro, zoom camera, sphere obstacles)."""
-    from pirl.physics.config import PhysicsConfig
+    from pirl.config.physics import PhysicsConfig
     from pirl.physics.webots.world import write_world
 
     cfg = _env_config(config, size=tuple(size), footprint=footprint)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.base import Advisor
+from pirl.config.run import RunConfig
 
 
 def default_cache_path() -> Path:
@@ -16,7 +17,9 @@ def default_cache_path() -> Path:
     return Path(base) / "advice.sqlite"
 
 
-def make_advisor(name: str, cfg: Any, cache: bool | None = None, process: bool = False) -> Advisor:
+def make_advisor(
+    name: str, cfg: RunConfig, cache: bool | None = None, process: bool = False
+) -> Advisor:
     """``local``, ``openai`` or ``oracle`` as configured by a RunConfig ``cfg``.
 
     ``process``: run the local model in a child process of its own (training: PPO keeps its
@@ -26,7 +29,7 @@ def make_advisor(name: str, cfg: Any, cache: bool | None = None, process: bool =
     answers cost nothing. The oracle is not an LLM: it is neither cached nor budgeted (its
     answer depends on the map, which the prompt does not hold).
     """
-    from pirl.world.config import ConfigError, UserError
+    from pirl.config.errors import ConfigError, UserError
 
     p = cfg.pare
     if name == "oracle":
@@ -60,7 +63,7 @@ def make_advisor(name: str, cfg: Any, cache: bool | None = None, process: bool =
     return advisor
 
 
-def _backend(name: str, cfg: Any) -> Advisor:
+def _backend(name: str, cfg: RunConfig) -> Advisor:
     a = cfg.advisor
     if name == "local":
         from pirl.advice.local import LocalAdvisor

@@ -13,7 +13,8 @@ from typing import Any
 
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.state import advice_requests
-from pirl.world.config import UserError
+from pirl.config.errors import UserError
+from pirl.config.world import VCPPConfig
 
 
 def backend_of(advisor: Any) -> Any:
@@ -71,7 +72,7 @@ def advise_within(
 
 def probe(
     advisor: Advisor,
-    env_cfg: Any,
+    env_cfg: VCPPConfig,
     prompt_variant: str = "paper",
     timeout_s: float = 30.0,
     log: Callable[[str], Any] | None = None,

@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_policy
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
 from pirl.agents.run_folder import folder_contents, lock_folder, release_folder
-from pirl.world.config import ConfigError, UserError
+from pirl.config.errors import ConfigError, UserError
+from pirl.config.run import RunConfig
 
 Progress = Callable[[int, int], None]
 

@@ -21,15 +21,15 @@ import torch
 import yaml
 from sb3_contrib import MaskablePPO
 
-from pirl.agents.config import RunConfig
 from pirl.agents.run_folder import (
     git_commit,
     prepare_run_folder,
     train_seed_base,
     write_json,
 )
+from pirl.config.errors import UserError
+from pirl.config.run import RunConfig
 from pirl.env.vec_env import make_vec_env
-from pirl.world.config import UserError
 
 TABNET_FILE = "tabnet.zip"
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from pirl.agents.policy import Policy, RandomPolicy
-from pirl.world.config import ConfigError, UserError
+from pirl.config.errors import ConfigError, UserError
 
 BUILTIN = ("boustrophedon", "random", "llm-only")
 LABELS = {

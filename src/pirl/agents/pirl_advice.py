@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pirl.agents.config import RunConfig
-from pirl.world.config import UserError
+from pirl.config.errors import UserError
+from pirl.config.run import RunConfig
 
 
 @dataclass

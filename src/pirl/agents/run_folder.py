@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.agents import checkpoint
-from pirl.world.config import ConfigError
+from pirl.config.errors import ConfigError
 
 
 def train_seed_base(seed: int) -> int:

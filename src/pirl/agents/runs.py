@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pirl.agents.config import RunConfig
+from pirl.config.run import RunConfig
 
 
 def train_one(

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from pirl.agents.config import RunConfig
+from pirl.config.run import RunConfig
 
 POLICY = "boustrophedon"
 """The reference policy whose states the teacher answers: the planner covers the world

@@ -31,7 +31,6 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import LABELS
 from pirl.agents.run_folder import (
     git_commit,
@@ -40,9 +39,11 @@ from pirl.agents.run_folder import (
     train_seed_base,
     write_json,
 )
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
+from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.wrapper import AdvisorFailing
-from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 
 PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
 EPISODE_COLUMNS = (

@@ -13,11 +13,11 @@ from typing import Any
 import numba
 import numpy as np
 
+from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.info import InfoSnapshot, LazyInfo
 from pirl.env.observation import _observation, build_observations, obs_extras, obs_size_for
 from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
-from pirl.world.config import REWARD_TERMS, VCPPConfig
 from pirl.world.dynamics import F_TERMINATED, F_TRUNCATED, N_ACTIONS, PI_STEP_LIMIT, step_one
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch

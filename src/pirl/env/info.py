@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from pirl.config.world import REWARD_TERMS
 from pirl.world import dynamics as D
-from pirl.world.config import REWARD_TERMS
 
 INFO_KEYS = frozenset(
     {

@@ -29,8 +29,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 
 N_SCALARS = 11
 N_TARGET = 3

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pirl.world.config import REWARD_TERMS, VCPPConfig
+from pirl.config.world import REWARD_TERMS, VCPPConfig
 
 LLM_INDEX = REWARD_TERMS.index("llm")
 

@@ -9,11 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from pirl.config.errors import ConfigError
+from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.world import dynamics as D
-from pirl.world.config import ConfigError, VCPPConfig
 from pirl.world.state import Scenario
 
 
@@ -88,7 +89,7 @@ class VCPPEnv(gym.Env):
     ## Arguments
     ``gymnasium.make("pirl/VCPP-v0", size=(X, Y, Z), footprint="paper"|"frustum",
     reward="static"|"ewri", wind_prob=0.1, ...)``: any field of
-    :class:`pirl.world.config.VCPPConfig` as a keyword, or ``config=`` a VCPPConfig or a
+    :class:`pirl.config.world.VCPPConfig` as a keyword, or ``config=`` a VCPPConfig or a
     mapping; ``render_mode="rgb_array"`` for top-down pictures. ``reset(options={"scenario":
     s})`` replays a given :class:`~pirl.world.state.Scenario`.
     """

@@ -10,12 +10,12 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 
 
 class VCPPVecEnv(VecEnv):

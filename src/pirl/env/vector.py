@@ -16,13 +16,14 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from pirl.config.errors import ConfigError
+from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.info import LazyVectorInfo
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
-from pirl.world.config import ConfigError, VCPPConfig
 
 
 class VCPPVectorEnv(VectorEnv):

@@ -33,10 +33,10 @@ from concurrent.futures import Future, as_completed
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from pirl.world.config import ConfigError
+from pirl.config.errors import ConfigError
 
 if TYPE_CHECKING:
-    from pirl.agents.config import RunConfig
+    from pirl.config.run import RunConfig
 
 INSTALL_HINT = "install the extra: pip install 'pirl[distributed]'"
 ADDRESS_FORMS = "HOST:PORT, ray://HOST:PORT, auto or local"

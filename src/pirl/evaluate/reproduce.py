@@ -21,17 +21,17 @@ from typing import Any, NamedTuple
 
 from pirl import _quiet
 from pirl.agents import checkpoint
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import (
     BUILTIN,
     check_act,  # noqa: I001
 )
 from pirl.agents.runs import train_one
 from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
 from pirl.evaluate.runner import EvalPlan, distinct_specs, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.evaluate.summary import honest_label
-from pirl.world.config import ConfigError
 
 Log = Callable[[str], None]
 

@@ -11,10 +11,10 @@ import numpy as np
 
 from pirl.agents.loading import LearnedPolicy, act_rng
 from pirl.agents.policy import Policy
+from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 from pirl.world.metrics import episode_metrics
 
 

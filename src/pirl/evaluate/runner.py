@@ -24,11 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from pirl import _quiet
-from pirl.agents.config import RunConfig
 from pirl.agents.loading import ACT_MODES, BUILTIN, LABELS, check_act, model_file, run_meta
+from pirl.config.errors import ConfigError
+from pirl.config.run import RunConfig
+from pirl.config.world import VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import write_summary
-from pirl.world.config import ConfigError, VCPPConfig
 
 SIMS = ("grid", "physics")
 FIXED = "fixed"  # the act of built-in methods: they act by their own rule in both modes

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 
-from pirl.world.config import ConfigError
+from pirl.config.errors import ConfigError
 
 EVAL_SEED_BASE = 1_000_000_000
 VALIDATION_OFFSET = 50_000  # evaluation uses at most this many scenarios per size

@@ -53,11 +53,11 @@ from pirl.advice.budget import BUDGET_EXHAUSTED
 from pirl.advice.factory import exhausted
 from pirl.advice.state import advice_requests
 from pirl.advice.student import Student, TeacherDataset, student_features
+from pirl.config.errors import ConfigError
 from pirl.env.vec_env import VCPPVecEnv
 from pirl.pare.alignment import _align_one
 from pirl.pare.teacher import TeacherQueue
 from pirl.world import dynamics as D
-from pirl.world.config import ConfigError
 
 MODES = ("student", "sync", "async")
 STATUSES = ("missing", "fresh", "cached", "stale", "student")

@@ -15,10 +15,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from pirl.physics.config import PhysicsConfig
 from pirl.physics.mission import Mission, Pose, StepPlan
 
-__all__ = ["Mission", "PhysicsConfig", "Pose", "StepPlan", "run_physics_episode"]
+__all__ = ["Mission", "Pose", "StepPlan", "run_physics_episode"]
 
 
 def __getattr__(name: str) -> Any:

@@ -46,12 +46,13 @@ from typing import Any
 import numpy as np
 from gymnasium.utils import seeding
 
+from pirl.config.errors import ConfigError
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.info import InfoSnapshot
 from pirl.env.observation import build_observations, obs_extras, obs_size_for
-from pirl.physics.config import PhysicsConfig
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
-from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch, draw_scenario

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from pirl.agents.policy import Policy
-from pirl.physics.config import PhysicsConfig
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.physics.mission import Mission, Pose, normalized_power
-from pirl.world.config import VCPPConfig
 
 # PyBullet calls made every physics step. BulletClient resolves them through __getattr__ with
 # inspect and functools on every call, 10-20% of a step's time; binding them once

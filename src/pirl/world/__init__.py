@@ -1,17 +1,14 @@
-"""The grid world: configuration, obstacles and scenarios, footprints, rules, metrics.
+"""The grid world: obstacles and scenarios, footprints, rules, metrics (its settings are
+:class:`pirl.config.world.VCPPConfig`).
 
 Pure numpy/numba: no reinforcement learning and no LLM here.
 """
 
-from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch, draw_scenario
 
 __all__ = [
-    "REWARD_TERMS",
-    "ConfigError",
     "Scenario",
-    "VCPPConfig",
     "WorldBatch",
     "draw_scenario",
     "episode_metrics",

@@ -33,7 +33,7 @@ N_INT_COLS = 18
 F_COLLISION, F_REDUNDANT, F_IDLE, F_TERMINATED, F_TRUNCATED, F_WIND, F_NEW = 0, 1, 2, 3, 4, 5, 6
 N_FLAG_COLS = 7
 
-# Reward term columns, in the order of pirl.world.config.REWARD_TERMS.
+# Reward term columns, in the order of pirl.config.world.REWARD_TERMS.
 T_COVERAGE, T_REDUNDANT, T_BATTERY, T_CAM, T_CURIOSITY, T_COLLISION, T_IDLE, T_LLM = range(8)
 N_TERMS = 8
 

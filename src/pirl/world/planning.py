@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.config import VCPPConfig
 from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells
 from pirl.world.state import WorldBatch
 

@@ -15,8 +15,9 @@ import numba
 import numpy as np
 
 from pirl.config import grid
+from pirl.config.errors import ConfigError
+from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.config import ConfigError, VCPPConfig
 from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells, max_footprint_cells
 
 _MAX_SCENARIO_TRIES = 200

@@ -28,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from pirl.physics.config import PhysicsConfig
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.physics.mission import Mission, Pose, normalized_power, touching
 from pirl.physics.webots.pilot import MavicPilot
-from pirl.world.config import VCPPConfig
 
 PROPELLERS = (
     "front left propeller",

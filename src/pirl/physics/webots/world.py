@@ -16,9 +16,9 @@ import json
 import math
 from pathlib import Path
 
-from pirl.physics.config import PhysicsConfig
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 from pirl.physics.mission import Mission
-from pirl.world.config import VCPPConfig
 
 WEBOTS_VERSION = "R2023b"
 CONTROLLER = "pirl_mavic"

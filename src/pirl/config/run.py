@@ -1,24 +1,24 @@
 """Run configuration: every value a user may change for training, in one YAML file.
 
-A preset (``configs/quick.yaml``, ``paper.yaml``, ``test.yaml``) has the sections below; each
-section is a dataclass with a docstring per field. Unknown keys, wrong types and impossible
-values are refused with a message naming the section and key.
+A preset (``configs/quick.yaml``, ``paper.yaml``, ``test.yaml``) has the sections below (plus
+``env``, :class:`~pirl.config.world.VCPPConfig`, and ``physics``,
+:class:`~pirl.config.physics.PhysicsConfig`); each is a frozen dataclass with a docstring per
+field, loaded and checked by :mod:`pirl.config.load`.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
-import yaml
-
-from pirl.physics.config import PhysicsConfig
-from pirl.world.config import ConfigError, VCPPConfig, check_keys
+from pirl.config.errors import ConfigError
+from pirl.config.load import Settings
+from pirl.config.physics import PhysicsConfig
+from pirl.config.world import VCPPConfig
 
 
 @dataclass(frozen=True)
-class PPOSettings:
+class PPOSettings(Settings, section="ppo"):
     """Stable-Baselines3 PPO and the batched environment it trains on."""
 
     n_envs: int = 16
@@ -56,9 +56,22 @@ class PPOSettings:
     their limit and moves out of the grid or into obstacles are never chosen); the trained
     policy acts on the same masks in every evaluation. False is the paper's action space."""
 
+    def validate(self) -> None:
+        """Positive sizes and rates, known schedule and device, discounts in (0, 1]."""
+        self.require_positive(
+            "n_envs", "n_steps", "batch_size", "n_epochs", "learning_rate", "torch_threads"
+        )
+        self.require_choice("lr_schedule", ("constant", "linear"))
+        self.require_choice("device", ("auto", "cpu", "cuda"))
+        if not all(n > 0 for n in self.net_arch):
+            raise self.refuse("net_arch", "must be positive layer sizes")
+        for key in ("gamma", "gae_lambda"):
+            if not 0 < getattr(self, key) <= 1:
+                raise self.refuse(key, "must be in (0, 1]")
+
 
 @dataclass(frozen=True)
-class TrainSettings:
+class TrainSettings(Settings, section="train"):
     """Length, checkpoints and logging of a run."""
 
     total_steps: int = 300_000
@@ -72,9 +85,14 @@ class TrainSettings:
     at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
     wide footprints it would not find by chance). Evaluation always starts at the env's pose."""
 
+    def validate(self) -> None:
+        """A positive length and checkpoint interval, a known camera start."""
+        self.require_positive("total_steps", "checkpoint_every")
+        self.require_choice("camera_start", ("fixed", "random"))
+
 
 @dataclass(frozen=True)
-class PareSettings:
+class PareSettings(Settings, section="pare"):
     """PIRL's reward shaping (DESIGN.md section 5)."""
 
     advisor: str = "local"
@@ -131,9 +149,24 @@ class PareSettings:
     teacher) ends with a warning, and its label in summaries, tables, figures and the report
     carries ``unshaped N%``: it trained mostly as PPO-EWRI."""
 
+    def validate(self) -> None:
+        """Positive intervals and sizes, known mode and prompt, shares in [0, 1]."""
+        self.require_positive(
+            "query_every", "timeout_s", "student_fit_steps", "student_hidden", "failure_window"
+        )
+        self.require_choice("mode", ("student", "sync", "async"))
+        self.require_choice("prompt_variant", ("paper", "compact"))
+        for key in (
+            "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate", "min_shaped"
+        ):  # fmt: skip
+            if not 0 <= getattr(self, key) <= 1:
+                raise self.refuse(key, "must be in [0, 1]")
+        if self.student_refit_growth < 0:
+            raise self.refuse("student_refit_growth", "must be >= 0")
+
 
 @dataclass(frozen=True)
-class AdvisorSettings:
+class AdvisorSettings(Settings, section="advisor"):
     """LLM backends. The API key is never here: it comes from the environment variable."""
 
     local_model: str = ""
@@ -165,9 +198,13 @@ class AdvisorSettings:
     openai_concurrency: int = 8
     """Requests in flight at once."""
 
+    def validate(self) -> None:
+        """Positive timeouts."""
+        self.require_positive("openai_timeout_s", "openai_deadline_s", "probe_timeout_s")
+
 
 @dataclass(frozen=True)
-class ILSettings:
+class ILSettings(Settings, section="il"):
     """Imitation learning (TabNet on PPO-EWRI rollouts)."""
 
     expert_steps: int = 20_000
@@ -181,14 +218,20 @@ class ILSettings:
     batch_size: int = 1024
     """TabNet batch size."""
 
+    def validate(self) -> None:
+        """Positive sizes, a validation share in (0, 1)."""
+        self.require_positive("expert_steps", "max_epochs", "batch_size")
+        if not 0 < self.valid_fraction < 1:
+            raise self.refuse("valid_fraction", "must be in (0, 1)")
+
 
 @dataclass(frozen=True)
-class ReproduceSettings:
+class ReproduceSettings(Settings, section="reproduce"):
     """What ``pirl reproduce`` trains and evaluates."""
 
     seeds: tuple[int, ...] = (0,)
     """Training seeds per method; their episodes pool into the confidence intervals."""
-    sizes: tuple[str, ...] = ("30", "45", "60")
+    sizes: tuple[str | int, ...] = ("30", "45", "60")
     """Evaluation worlds (N for NxNx3, or XxYxZ)."""
     episodes: int = 100
     """Scenarios per size for every method."""
@@ -198,7 +241,7 @@ class ReproduceSettings:
     """LLM calls allowed per LLM-only episode (0 = no limit); after that it holds still."""
     oracle_pirl: bool = True
     """Also train PIRL with the oracle advisor (a labelled extra, not an LLM)."""
-    physics_sizes: tuple[str, ...] = ("30", "45", "60")
+    physics_sizes: tuple[str | int, ...] = ("30", "45", "60")
     """Worlds flown in the physics simulator (empty = no physics table)."""
     physics_episodes: int = 100
     """Scenarios per size in the physics simulator (the same seeds as the grid's first ones)."""
@@ -225,74 +268,41 @@ class ReproduceSettings:
     own while PPO-SR and PPO-EWRI train; answers already there count), so the student passes
     its gate at the run's first rollouts. 0 = no teacher phase."""
 
-
-_SECTIONS = {
-    "ppo": PPOSettings,
-    "train": TrainSettings,
-    "pare": PareSettings,
-    "advisor": AdvisorSettings,
-    "il": ILSettings,
-    "reproduce": ReproduceSettings,
-}
+    def validate(self) -> None:
+        """At least one seed, positive episode and worker counts."""
+        self.require_positive(
+            "episodes", "llm_only_episodes", "workers", "gif_every", "physics_episodes"
+        )
+        if self.teacher_phase_answers < 0:
+            raise self.refuse("teacher_phase_answers", "must be >= 0")
+        if not self.seeds:
+            raise self.refuse("seeds", "must be a non-empty list of integers")
 
 
 @dataclass(frozen=True)
-class RunConfig:
+class RunConfig(Settings):
     """A whole preset: the environment plus every training section."""
 
     env: VCPPConfig = field(default_factory=VCPPConfig)
+    """The grid world and the environment (``env``)."""
     ppo: PPOSettings = field(default_factory=PPOSettings)
+    """PPO and the batched environment it trains on."""
     train: TrainSettings = field(default_factory=TrainSettings)
+    """Length, checkpoints and logging of a run."""
     pare: PareSettings = field(default_factory=PareSettings)
+    """PIRL's reward shaping."""
     advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
+    """LLM backends."""
     il: ILSettings = field(default_factory=ILSettings)
+    """Imitation learning."""
     reproduce: ReproduceSettings = field(default_factory=ReproduceSettings)
+    """What ``pirl reproduce`` trains and evaluates."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
 
-    def __post_init__(self) -> None:
-        _validate(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> RunConfig:
-        if not isinstance(data, dict):
-            raise ConfigError("a run config is a mapping of sections")
-        check_keys(data, ["env", *_SECTIONS, "physics"])
-        parts: dict[str, Any] = {"env": VCPPConfig.from_dict(data.get("env") or {})}
-        parts["physics"] = PhysicsConfig.from_dict(data.get("physics") or {})
-        for name, section in _SECTIONS.items():
-            values = data.get(name) or {}
-            if not isinstance(values, dict):
-                raise ConfigError(f"section {name!r} must be a mapping")
-            check_keys(values, [f.name for f in fields(section)], name)
-            kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-            parts[name] = section(**kwargs)
-        return cls(**parts)
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> RunConfig:
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file not found: {path}")
-        try:
-            data = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
-        if data is None:
-            # An empty file would silently train on built-in defaults that match no preset.
-            raise ConfigError(
-                f"{path} is empty; give settings (or {{}} for the built-in defaults), or a "
-                "preset such as quick or test"
-            )
-        return cls.from_dict(data)
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"env": self.env.to_dict()}
-        for name in _SECTIONS:
-            values = asdict(getattr(self, name))
-            out[name] = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
-        out["physics"] = self.physics.to_dict()
-        return out
+    def validate(self) -> None:
+        """Each section checked itself; what is left are the names of plugged-in parts."""
+        _check_names(self)
 
     def with_overrides(self, **sections: dict[str, Any]) -> RunConfig:
         """A copy with some values changed, e.g. ``with_overrides(train={"total_steps": 10})``."""
@@ -302,76 +312,24 @@ class RunConfig:
         return RunConfig.from_dict(data)
 
 
-def _validate(cfg: RunConfig) -> None:
-    for name in _SECTIONS:
-        section = getattr(cfg, name)
-        for f in fields(section):
-            value, default = getattr(section, f.name), f.default
-            expected = type(default)
-            if expected is float and isinstance(value, int) and not isinstance(value, bool):
-                continue
-            if not isinstance(value, expected) or (
-                isinstance(value, bool) and expected is not bool
-            ):
-                raise ConfigError(
-                    f"{name}.{f.name}={value!r} has type {type(value).__name__}; "
-                    f"expected {expected.__name__}"
-                )
-    p, t, pare = cfg.ppo, cfg.train, cfg.pare
-    positive = {
-        "ppo.n_envs": p.n_envs, "ppo.n_steps": p.n_steps, "ppo.batch_size": p.batch_size,
-        "ppo.n_epochs": p.n_epochs, "ppo.learning_rate": p.learning_rate,
-        "ppo.torch_threads": p.torch_threads, "train.total_steps": t.total_steps,
-        "train.checkpoint_every": t.checkpoint_every, "pare.query_every": pare.query_every,
-        "pare.timeout_s": pare.timeout_s, "pare.student_fit_steps": pare.student_fit_steps,
-        "pare.student_hidden": pare.student_hidden, "pare.failure_window": pare.failure_window,
-        "il.expert_steps": cfg.il.expert_steps,
-        "il.max_epochs": cfg.il.max_epochs, "il.batch_size": cfg.il.batch_size,
-        "reproduce.episodes": cfg.reproduce.episodes,
-        "reproduce.llm_only_episodes": cfg.reproduce.llm_only_episodes,
-        "reproduce.workers": cfg.reproduce.workers, "reproduce.gif_every": cfg.reproduce.gif_every,
-        "reproduce.physics_episodes": cfg.reproduce.physics_episodes,
-        "advisor.openai_timeout_s": cfg.advisor.openai_timeout_s,
-        "advisor.openai_deadline_s": cfg.advisor.openai_deadline_s,
-        "advisor.probe_timeout_s": cfg.advisor.probe_timeout_s,
-    }  # fmt: skip
-    for key, value in positive.items():
-        if value <= 0:
-            raise ConfigError(f"{key}={value!r}: must be > 0")
-    if t.camera_start not in ("fixed", "random"):
-        raise ConfigError(
-            f"train.camera_start={t.camera_start!r}: allowed values are fixed, random"
-        )
+def _check_names(cfg: RunConfig) -> None:
+    """The advisor name, checked against a list of names (kept apart from the section rules
+    so that a registry of advisors can take this check over whole)."""
+    pare = cfg.pare
     choices = {
-        "ppo.lr_schedule": (p.lr_schedule, ("constant", "linear")),
-        "ppo.device": (p.device, ("auto", "cpu", "cuda")),
         "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
-        "pare.mode": (pare.mode, ("student", "sync", "async")),
-        "pare.prompt_variant": (pare.prompt_variant, ("paper", "compact")),
     }
     for key, (value, allowed) in choices.items():
         if value not in allowed:
             raise ConfigError(f"{key}={value!r}: allowed values are {', '.join(allowed)}")
-    for key, value in (
-        ("pare.teacher_rate", pare.teacher_rate),
-        ("pare.oracle_teacher_rate", pare.oracle_teacher_rate),
-        ("pare.student_gate", pare.student_gate),
-        ("pare.max_failure_rate", pare.max_failure_rate),
-        ("pare.min_shaped", pare.min_shaped),
-    ):
-        if not 0 <= value <= 1:
-            raise ConfigError(f"{key}={value!r}: must be in [0, 1]")
-    if pare.student_refit_growth < 0:
-        raise ConfigError(f"pare.student_refit_growth={pare.student_refit_growth!r}: must be >= 0")
-    if cfg.reproduce.teacher_phase_answers < 0:
-        raise ConfigError(
-            f"reproduce.teacher_phase_answers={cfg.reproduce.teacher_phase_answers!r}: must be >= 0"
-        )
-    if not 0 < cfg.il.valid_fraction < 1:
-        raise ConfigError(f"il.valid_fraction={cfg.il.valid_fraction!r}: must be in (0, 1)")
-    if not all(isinstance(n, int) and n > 0 for n in p.net_arch):
-        raise ConfigError(f"ppo.net_arch={list(p.net_arch)!r}: must be positive layer sizes")
-    if not cfg.reproduce.seeds or not all(isinstance(v, int) for v in cfg.reproduce.seeds):
-        raise ConfigError("reproduce.seeds must be a non-empty list of integers")
-    if not 0 < p.gamma <= 1 or not 0 < p.gae_lambda <= 1:
-        raise ConfigError("ppo.gamma and ppo.gae_lambda must be in (0, 1]")
+
+
+__all__ = [
+    "AdvisorSettings",
+    "ILSettings",
+    "PPOSettings",
+    "PareSettings",
+    "ReproduceSettings",
+    "RunConfig",
+    "TrainSettings",
+]

@@ -1,21 +1,19 @@
 """Settings of the physics backends (PyFlyt here, Webots for users who have it).
 
-One frozen dataclass, :class:`PhysicsConfig`. Every field has a docstring; impossible values
-raise :class:`~pirl.world.config.ConfigError` naming the field.
+:class:`PhysicsConfig` is the ``physics`` section of a run config; it is loaded and checked by
+:mod:`pirl.config.load` like every other section.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import dataclass
 
-from pirl.world.config import ConfigError, check_keys
+from pirl.config.load import Settings
 
 
 @dataclass(frozen=True)
-class PhysicsConfig:
+class PhysicsConfig(Settings, section="physics"):
     """How the grid world maps onto a flying quadrotor (DESIGN.md section 10)."""
 
     cell_size_m: float = 1.0
@@ -73,74 +71,32 @@ class PhysicsConfig:
     """Radius of the drone for the geometric obstacle check of the Webots controller, metres
     (PyFlyt detects contacts from the collision shapes instead)."""
 
-    def __post_init__(self) -> None:
-        _validate(self)
-
-    @classmethod
-    def from_dict(cls, values: Mapping[str, Any]) -> PhysicsConfig:
-        """Build from a mapping, refusing unknown keys."""
-        if not isinstance(values, Mapping):
-            raise ConfigError(f"expected a mapping of physics settings, got {type(values)}")
-        check_keys(values, [f.name for f in fields(cls)], "physics")
-        clean = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-        return cls(**clean)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain, YAML-safe dict of every setting."""
-        out = {}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            out[f.name] = list(value) if isinstance(value, tuple) else value
-        return out
-
-
-def _validate(cfg: PhysicsConfig) -> None:
-    positive = (
-        "cell_size_m", "level_height_m", "gust_period_s", "tolerance_m", "step_timeout_s",
-        "sample_hz", "position_gain", "max_speed_m_s", "body_radius_m", "max_thrust_to_weight",
-    )  # fmt: skip
-    for name in positive:
-        value = getattr(cfg, name)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"physics.{name}={value!r}: expected a number")
-        if not (math.isfinite(value) and value > 0):
-            raise ConfigError(f"physics.{name}={value!r}: must be a positive number")
-    for name in ("wind_gust", "camera_hold_s", "energy_per_hover_s"):
-        value = getattr(cfg, name)
-        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
-            raise ConfigError(f"physics.{name}={value!r}: must be a number >= 0")
-    if not cfg.max_thrust_to_weight >= 1:
-        raise ConfigError(
-            f"physics.max_thrust_to_weight={cfg.max_thrust_to_weight!r}: must be >= 1 (hover)"
-        )
-    wind = cfg.wind_mean
-    if not (
-        isinstance(wind, tuple | list)
-        and len(wind) == 3
-        and all(isinstance(w, int | float) and math.isfinite(w) for w in wind)
-    ):
-        raise ConfigError(f"physics.wind_mean={wind!r}: expected three numbers (x, y, z) in m/s")
-    object.__setattr__(cfg, "wind_mean", tuple(float(w) for w in wind))
-    for name in ("physics_hz", "control_hz"):
-        value = getattr(cfg, name)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ConfigError(f"physics.{name}={value!r}: must be a positive integer")
-    if cfg.physics_hz % cfg.control_hz:
-        raise ConfigError(
-            f"physics.control_hz={cfg.control_hz} must divide physics_hz={cfg.physics_hz}"
-        )
-    if not isinstance(cfg.stabilized_gimbal, bool):
-        raise ConfigError(f"physics.stabilized_gimbal={cfg.stabilized_gimbal!r}: true or false")
-    for name in ("recover_tilt_deg", "camera_energy"):
-        value = getattr(cfg, name)
-        if (value is not None or name != "camera_energy") and (
-            isinstance(value, bool) or not isinstance(value, int | float)
-        ):
-            raise ConfigError(f"physics.{name}={value!r}: expected a number")
-    if cfg.camera_energy is not None and not cfg.camera_energy >= 0:
-        raise ConfigError(f"physics.camera_energy={cfg.camera_energy!r}: must be >= 0 or None")
-    if not 0 < cfg.recover_tilt_deg <= 180:
-        raise ConfigError(f"physics.recover_tilt_deg={cfg.recover_tilt_deg!r}: allowed (0, 180]")
+    def validate(self) -> None:
+        """Positive rates and distances, the controller dividing the physics rate."""
+        positive = (
+            "cell_size_m", "level_height_m", "gust_period_s", "tolerance_m", "step_timeout_s",
+            "sample_hz", "position_gain", "max_speed_m_s", "body_radius_m",
+            "max_thrust_to_weight",
+        )  # fmt: skip
+        for key in positive:
+            if not (math.isfinite(getattr(self, key)) and getattr(self, key) > 0):
+                raise self.refuse(key, "must be a positive number")
+        for key in ("wind_gust", "camera_hold_s", "energy_per_hover_s"):
+            if not getattr(self, key) >= 0:
+                raise self.refuse(key, "must be a number >= 0")
+        if not self.max_thrust_to_weight >= 1:
+            raise self.refuse("max_thrust_to_weight", "must be >= 1 (hover)")
+        if not all(math.isfinite(w) for w in self.wind_mean):
+            raise self.refuse("wind_mean", "expected three finite numbers (x, y, z) in m/s")
+        # The flight code does float maths with it; YAML gives [1, 0, 0] as integers.
+        object.__setattr__(self, "wind_mean", tuple(float(w) for w in self.wind_mean))
+        self.require_positive("physics_hz", "control_hz")
+        if self.physics_hz % self.control_hz:
+            raise self.refuse("control_hz", f"must divide physics_hz={self.physics_hz}")
+        if self.camera_energy is not None and not self.camera_energy >= 0:
+            raise self.refuse("camera_energy", "must be >= 0 or None")
+        if not 0 < self.recover_tilt_deg <= 180:
+            raise self.refuse("recover_tilt_deg", "allowed (0, 180]")
 
 
 __all__ = ["PhysicsConfig"]

@@ -1,0 +1,247 @@
+"""Settings of the grid world and the environment, and the world constants they default to.
+
+:class:`VCPPConfig` holds every value a user may change about the world (the ``env`` section of
+a run config, or the keywords of ``gym.make("pirl/VCPP-v0", ...)``); it is loaded and checked by
+:mod:`pirl.config.load` like every other section.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pirl.config.errors import ConfigError
+from pirl.config.grid import (
+    PAN_MAX,
+    PAN_MIN,
+    PAN_STEP,
+    TILT_MAX,
+    TILT_MIN,
+    TILT_STEP,
+    ZOOM_MAX10,
+    ZOOM_MIN10,
+)
+from pirl.config.load import Settings
+
+BASE_SIZE = (15, 15, 3)
+"""The training world the paper scales from."""
+
+REWARD_TERMS = (
+    "coverage",
+    "redundant",
+    "battery",
+    "cam_usage",
+    "curiosity",
+    "collision",
+    "idle",
+    "llm",
+)
+"""The reward terms, in the order of every weight vector and of the dynamics' term columns."""
+STATIC_WEIGHTS = (1.0, -0.6, -0.3, 0.4, 0.35, -1.15, -0.55, 0.4)
+"""The static (PPO-SR) weights, in the order of REWARD_TERMS."""
+EWRI_RANGES = (
+    (0.5, 1.5),
+    (-1.0, -0.2),
+    (-0.5, -0.1),
+    (0.2, 0.6),
+    (0.2, 0.5),
+    (-1.5, -0.8),
+    (-0.8, -0.3),
+    (0.2, 0.6),
+)
+"""The EWRI (low, high) uniform ranges, in the order of REWARD_TERMS."""
+
+
+def zoom_to_tenths(zoom: float, key: str = "zoom") -> int:
+    """Convert a zoom factor to integer tenths, refusing values off the 0.1 grid."""
+    tenths = round(zoom * 10)
+    if abs(zoom * 10 - tenths) > 1e-6 or not ZOOM_MIN10 <= tenths <= ZOOM_MAX10:
+        raise ConfigError(
+            f"{key}={zoom!r} is off the zoom grid: allowed values are 0.5, 0.6, ..., 2.0"
+        )
+    return tenths
+
+
+@dataclass(frozen=True)
+class VCPPConfig(Settings, section="env"):
+    """Every setting of the VCPP world and environment (DESIGN.md sections 3, 4 and 8)."""
+
+    size: tuple[int, int, int] = BASE_SIZE
+    """Grid size (X, Y, Z) in cells; each at least 3."""
+    footprint: str = "paper"
+    """Camera footprint model: 'paper' (square, the paper's simulator) or 'frustum' (pinhole)."""
+    occlusion: bool = False
+    """Frustum only: hide ground cells whose line of sight crosses an obstacle sphere."""
+    fov_deg: float = 90.0
+    """Frustum only: horizontal field of view at zoom 1.0, degrees."""
+    max_range: float = 8.0
+    """Frustum only: ground points farther than this (cells) are cut at this range."""
+    obstacles_min: int = 2
+    """Fewest obstacle spheres per episode."""
+    obstacles_max: int = 5
+    """Most obstacle spheres per episode."""
+    radius_min: float = 1.0
+    """Smallest sphere radius, cells."""
+    radius_max: float = 2.0
+    """Largest sphere radius, cells."""
+    obstacles_scale_with_area: bool = False
+    """Multiply the obstacle count by the ground area relative to 15x15 (off in the paper)."""
+    wind_prob: float = 0.1
+    """Probability per step that a gust pushes the UAV one cell along +-x or +-y."""
+    battery_capacity: float = 100.0
+    """Energy units at the training size; multiplied by alpha when scale_by_alpha."""
+    max_steps: int = 200
+    """Step limit at the training size; multiplied by alpha when scale_by_alpha."""
+    scale_by_alpha: bool = True
+    """Scale battery and step limit by alpha = (X*Y*Z) / (15*15*3), as the paper does."""
+    energy_move: float = 1.0
+    """Energy of an x/y move."""
+    energy_climb: float = 1.5
+    """Energy of a z+ move."""
+    energy_descend: float = 0.7
+    """Energy of a z- move."""
+    energy_camera: float = 0.2
+    """Energy of a camera action."""
+    energy_hover: float = 0.1
+    """Energy spent every step, whatever the action."""
+    start_tilt: int = 90
+    """Camera tilt at reset, degrees (0 forward, 90 straight down), multiple of 5."""
+    start_pan: int = 0
+    """Camera pan at reset, degrees (0 = +x), multiple of 15 in [-90, 90]."""
+    start_zoom: float = 1.0
+    """Camera zoom at reset, on the grid 0.5, 0.6, ..., 2.0."""
+    start_camera: str = "fixed"
+    """'fixed': every episode starts with the camera at start_tilt/pan/zoom (the paper). 'random':
+    each scenario also draws its starting camera pose uniformly on the grid (exploring starts;
+    training only: ``train.camera_start``)."""
+    reward: str = "static"
+    """Reward weights: 'static' (PPO-SR) or 'ewri' (re-drawn at every reset)."""
+    static_weights: tuple[float, ...] = STATIC_WEIGHTS
+    """Static weights in the order of REWARD_TERMS."""
+    ewri_ranges: tuple[tuple[float, float], ...] = EWRI_RANGES
+    """EWRI (low, high) uniform ranges in the order of REWARD_TERMS."""
+    llm_weight: bool = False
+    """Keep the LLM weight (set by PARE); False leaves it 0, as for PPO-SR and PPO-EWRI."""
+    obs_window: int = 11
+    """Side of the egocentric local window in the observation (odd)."""
+    obs_global: int = 8
+    """Side of the coarse global coverage summary in the observation."""
+    obs_visits: bool = False
+    """Add a local window of this episode's visit counts at the UAV's altitude (min(v, 3)/3):
+    the curiosity term rewards unvisited cells, and without it a policy cannot see which ones
+    it has visited, so a greedy policy can loop (uavSim keeps a position history for this).
+    False is the paper's observation."""
+    obs_target: bool = False
+    """Add the direction to the nearest coverable cell not yet covered and its distance in
+    cells (saturating at 16), so a policy trained on a small world can find the work left on a
+    large one where its local window shows none. False is the paper's observation."""
+    render_cell_px: int = 0
+    """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
+
+    def validate(self) -> None:
+        """Sizes, choices, ranges and the camera's start pose on the action grid."""
+        size = self.size
+        if min(size) < 3:
+            raise ConfigError(
+                f"{self.where('size')}={size!r} is impossible: every side must be >= 3 cells"
+            )
+        if max(size) > 2048:
+            raise self.refuse("size", "sides above 2048 cells are not supported")
+        self.require_choice("footprint", ("paper", "frustum"))
+        self.require_choice("reward", ("static", "ewri"))
+        if not 0.0 <= self.wind_prob <= 1.0:
+            raise self.refuse("wind_prob", "allowed range is [0, 1]")
+        if not 0.0 < self.fov_deg < 180.0:
+            raise self.refuse("fov_deg", "allowed range is (0, 180)")
+        self.require_positive("max_range")
+        if not 0 <= self.obstacles_min <= self.obstacles_max:
+            raise ConfigError(
+                f"{self.where('obstacles_min')}={self.obstacles_min}, "
+                f"{self.where('obstacles_max')}={self.obstacles_max}: "
+                "need 0 <= obstacles_min <= obstacles_max"
+            )
+        if not 0 < self.radius_min <= self.radius_max:
+            raise ConfigError(
+                f"{self.where('radius_min')}={self.radius_min}, "
+                f"{self.where('radius_max')}={self.radius_max}: need 0 < radius_min <= radius_max"
+            )
+        if not (math.isfinite(self.battery_capacity) and self.battery_capacity > 0):
+            raise self.refuse("battery_capacity", "must be a positive number")
+        if self.max_steps < 1:
+            raise self.refuse("max_steps", "must be >= 1")
+        for key in (
+            "energy_move",
+            "energy_climb",
+            "energy_descend",
+            "energy_camera",
+            "energy_hover",
+        ):
+            if getattr(self, key) < 0:
+                raise self.refuse(key, "energy must be >= 0")
+        if self.energy_move <= 0:
+            raise self.refuse("energy_move", "must be > 0: it normalizes the battery reward term")
+        if self.start_tilt % TILT_STEP or not TILT_MIN <= self.start_tilt <= TILT_MAX:
+            raise self.refuse("start_tilt", "allowed values are 0, 5, ..., 90")
+        if self.start_pan % PAN_STEP or not PAN_MIN <= self.start_pan <= PAN_MAX:
+            raise self.refuse("start_pan", "allowed values are -90, -75, ..., 90")
+        zoom_to_tenths(self.start_zoom, self.where("start_zoom"))
+        self.require_choice("start_camera", ("fixed", "random"))
+        if len(self.static_weights) != len(REWARD_TERMS):
+            raise self.refuse(
+                "static_weights",
+                f"expected {len(REWARD_TERMS)} numbers for {', '.join(REWARD_TERMS)}",
+            )
+        if len(self.ewri_ranges) != len(REWARD_TERMS) or not all(
+            low <= high for low, high in self.ewri_ranges
+        ):
+            raise self.refuse(
+                "ewri_ranges",
+                f"expected {len(REWARD_TERMS)} [low, high] pairs with low <= high "
+                f"for {', '.join(REWARD_TERMS)}",
+            )
+        if self.obs_window < 3 or self.obs_window % 2 == 0:
+            raise self.refuse("obs_window", "must be an odd integer >= 3")
+        if self.obs_global < 1:
+            raise self.refuse("obs_global", "must be >= 1")
+        if self.render_cell_px < 0:
+            raise self.refuse("render_cell_px", "must be >= 0")
+
+    # -- derived values -------------------------------------------------------------------
+    @property
+    def alpha(self) -> float:
+        """Size scale factor relative to the 15x15x3 training world."""
+        x, y, z = self.size
+        return (x * y * z) / (BASE_SIZE[0] * BASE_SIZE[1] * BASE_SIZE[2])
+
+    @property
+    def capacity(self) -> float:
+        """Battery capacity (energy units) of this world."""
+        return self.battery_capacity * (self.alpha if self.scale_by_alpha else 1.0)
+
+    @property
+    def step_limit(self) -> int:
+        """Step limit of this world."""
+        return int(round(self.max_steps * (self.alpha if self.scale_by_alpha else 1.0)))
+
+    @property
+    def start_zoom10(self) -> int:
+        """Camera zoom at reset in tenths (the dynamics' integer zoom)."""
+        return zoom_to_tenths(self.start_zoom, "start_zoom")
+
+    @property
+    def obstacle_count_range(self) -> tuple[int, int]:
+        """Inclusive (min, max) obstacle count, scaled with area when asked."""
+        if not self.obstacles_scale_with_area:
+            return self.obstacles_min, self.obstacles_max
+        area = self.size[0] * self.size[1] / (BASE_SIZE[0] * BASE_SIZE[1])
+        return max(0, round(self.obstacles_min * area)), max(0, round(self.obstacles_max * area))
+
+
+__all__ = [
+    "BASE_SIZE",
+    "EWRI_RANGES",
+    "REWARD_TERMS",
+    "STATIC_WEIGHTS",
+    "VCPPConfig",
+    "zoom_to_tenths",
+]
