@@ -34,6 +34,12 @@ class Weights:
     alpha: float = 0.5
     """Direction vs position in the move alignment."""
 
+    def constants(self, size: tuple[int, int, int]) -> np.ndarray:
+        """The kernel's constants on a grid of ``size`` (X, Y, Z): d_max, alpha, lam_cam,
+        lam_move (computed once per run, not per step)."""
+        d_max = float(np.linalg.norm(np.asarray(size, dtype=np.float64) - 1.0))
+        return np.array([d_max, self.alpha, self.lam_cam, self.lam_move])
+
 
 @dataclass
 class Shaped:
@@ -84,24 +90,18 @@ def shape(
     rec: np.ndarray,
     meta: np.ndarray,
     t: int,
-    size: tuple[int, int, int],
-    weights: Weights,
+    consts: np.ndarray,
 ) -> Shaped:
     """The LLM term of one step for every world.
 
-    ``p_t`` (N, 3): positions before the step; ``pose`` (N, 6): position and camera (tilt,
-    pan, zoom tenths) after it; ``rec`` (N, 6) and ``meta`` (N, 3): the advice each world
-    holds; ``t``: the step; ``size``: the grid (X, Y, Z).
+    ``p_t`` (N, 3) float64: positions before the step; ``pose`` (N, 6) int64: position and
+    camera (tilt, pan, zoom tenths) after it; ``rec`` (N, 6) and ``meta`` (N, 3): the advice
+    each world holds; ``t``: the step; ``consts``: :meth:`Weights.constants` of the grid.
     """
     n = len(p_t)
-    d_max = float(np.linalg.norm(np.asarray(size, dtype=np.float64) - 1.0))
-    consts = np.array([d_max, weights.alpha, weights.lam_cam, weights.lam_move])
     table = np.empty((n, 5), dtype=np.float64)
     marks = np.empty((n, 2), dtype=np.int64)
-    _shape_kernel(
-        np.asarray(p_t, dtype=np.float64), np.asarray(pose, dtype=np.int64), rec, meta, t,
-        consts, table, marks,
-    )  # fmt: skip
+    _shape_kernel(p_t, pose, rec, meta, t, consts, table, marks)
     return Shaped(table, marks[:, 0], marks[:, 1])
 
 

@@ -24,6 +24,8 @@ from pirl.pare.sources import SOURCES, AdviceSource, SourceSetup
 from pirl.pare.stats import Health, PareStats
 from pirl.world.config import ConfigError
 
+_NONE = np.zeros(0, dtype=np.int64)
+
 
 class PARE:
     """Shapes the rewards of a batched VCPP environment with the advice of ``source``.
@@ -47,6 +49,7 @@ class PARE:
     ) -> None:
         self.env, self.source, self.board, self.health = env, source, board, health
         self.weights = weights
+        self._consts = weights.constants(env.cfg.size)
         self._p_t = np.zeros((board.n, 3), dtype=np.float64)
         # Cumulative steps per status, then the staleness sum.
         self._counts = np.zeros(6, dtype=np.int64)
@@ -129,20 +132,18 @@ class PARE:
         """
         env, board, st = self.env, self.board, self.stats
         self.source.collect()
-        shaped = shape(
-            self._p_t, env.step_poses(), board.rec, board.meta, board.t, env.cfg.size,
-            self.weights,
-        )  # fmt: skip
+        shaped = shape(self._p_t, env.step_poses(), board.rec, board.meta, board.t, self._consts)
         f_llm = shaped.table[:, 0]
         env.set_step_term("llm", f_llm)
         add_llm_term(rewards, f_llm, env.step_weights("llm"))
-        counted: Any = slice(None) if restarted is None else ~restarted
-        status, staleness = shaped.status[counted], shaped.staleness[counted]
+        status, staleness = shaped.status, shaped.staleness
+        if restarted is not None:
+            status, staleness = status[~restarted], staleness[~restarted]
         self._counts[:5] += np.bincount(status, minlength=5)
         self._counts[5] += int(staleness.sum())
         st.steps += len(status)
         st.count_steps(self._counts)
-        ended = np.flatnonzero(dones)
+        ended = np.flatnonzero(dones) if dones.any() else _NONE
         board.tick(ended)
         if restarted is not None:
             board.episode_step[restarted] = 0  # the reset was no step of the new episode
