@@ -35,8 +35,10 @@ from pirl.advice.cache import CachedAdvisor
 from pirl.advice.local import LocalAdvisor, _common_length
 from pirl.advice.prompt import build_prompt
 from pirl.advice.state import prompt_state
+from pirl.agents.pirl_advice import PirlAdvice
+from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
-from pirl.pare.wrapper import PAREVecEnv
+from pirl.pare.vec_env import PAREVecEnv
 
 SETTINGS = {"size": (15, 15, 3), "reward": "ewri", "llm_weight": True}
 
@@ -69,7 +71,9 @@ def unwrapped_rate(envs: int, steps: int) -> float:
 
 
 def pare_case(advisor, envs: int, mode: str, k: int, steps: int | None, seconds: float) -> dict:
-    pare = PAREVecEnv(make_vec_env(envs, seed=0, **SETTINGS), advisor, query_every=k, mode=mode)
+    settings = PareSettings(mode=mode, query_every=k)
+    advice = PirlAdvice(advisor, None, None, 0.0, 16, "")
+    pare = PAREVecEnv.from_settings(make_vec_env(envs, seed=0, **SETTINGS), settings, advice)
     pare.reset()
     actions = np.random.default_rng(0).integers(0, 12, (100_000, envs))
     hits0 = getattr(advisor, "hits", 0)
@@ -82,7 +86,7 @@ def pare_case(advisor, envs: int, mode: str, k: int, steps: int | None, seconds:
         n += 1
     elapsed = time.perf_counter() - start
     stats = pare.stats.as_dict()
-    pare._drain()
+    pare.pare.source.reset()  # waits for the batch in flight; the advisor serves the next case
     hits = getattr(advisor, "hits", 0) - hits0
     misses = getattr(advisor, "misses", 0) - misses0
     return {

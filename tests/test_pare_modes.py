@@ -33,8 +33,8 @@ from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.env import make_vec_env
 from pirl.env.observation import obs_size
-from pirl.pare.wrapper import AdvisorFailing, PAREVecEnv
-from test_pare_wrapper import SlowOracle  # the real oracle with an LLM's latency
+from pirl.pare.stats import AdvisorFailing
+from test_pare_wrapper import SlowOracle, make_pare  # the oracle with an LLM's latency
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
@@ -145,7 +145,7 @@ def _student_pare(tmp_path, teacher, n=4, **kw):
     student, dataset = _student(venv, teacher, tmp_path / "ds.sqlite")
     args = dict(teacher_rate=0.5, gate=0.0, refit_every=8, fit_steps=50, wait_teacher=True)
     args.update(kw)
-    return PAREVecEnv(venv, teacher, mode="student", student=student, dataset=dataset, **args)
+    return make_pare(venv, teacher, mode="student", student=student, dataset=dataset, **args)
 
 
 def test_student_mode_shapes_every_step_with_advice_about_the_current_state(tmp_path):
@@ -198,7 +198,7 @@ def test_student_gate_keeps_steps_unshaped_until_agreement(tmp_path):
 
 def test_async_drops_answers_about_ended_episodes():
     settings = dict(SETTINGS, max_steps=4, scale_by_alpha=False)
-    pare = PAREVecEnv(make_vec_env(2, seed=7, **settings), SlowOracle(0.15), mode="async")
+    pare = make_pare(make_vec_env(2, seed=7, **settings), SlowOracle(0.15), mode="async")
     pare.reset()
     rng = np.random.default_rng(0)
     for _ in range(40):
@@ -219,7 +219,7 @@ def test_budget_exhaustion_stops_teacher_shaping_at_once(tmp_path, mode):
     if mode == "student":
         pare = _student_pare(tmp_path, teacher, teacher_rate=1.0, refit_every=4)
     else:
-        pare = PAREVecEnv(make_vec_env(4, seed=1, **SETTINGS), teacher, mode=mode)
+        pare = make_pare(make_vec_env(4, seed=1, **SETTINGS), teacher, mode=mode)
     pare.reset()
     rng = np.random.default_rng(1)
     shaped_after = []
@@ -239,7 +239,7 @@ def test_budget_exhaustion_stops_teacher_shaping_at_once(tmp_path, mode):
 
 
 def test_failure_rate_stops_training_with_a_checkpoint(tmp_path):
-    pare = PAREVecEnv(
+    pare = make_pare(
         make_vec_env(4, seed=1, **SETTINGS), Flaky(good=3), mode="sync", failure_window=40,
         max_failure_rate=0.5,
     )  # fmt: skip

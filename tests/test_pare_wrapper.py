@@ -10,11 +10,13 @@ import pytest
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.oracle import OracleAdvisor
 from pirl.advice.recommendation import Recommendation
+from pirl.agents.pirl_advice import PirlAdvice
 from pirl.config.errors import ConfigError
+from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
 from pirl.env.rewards import LLM_INDEX
 from pirl.pare import alignment, f_llm
-from pirl.pare.wrapper import PAREVecEnv
+from pirl.pare.vec_env import PAREVecEnv
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
 
@@ -42,6 +44,35 @@ class Unreadable(Advisor):
         return [Answer("I think the drone should fly somewhere nice.", None) for _ in prompts]
 
 
+def make_pare(
+    venv,
+    advisor,
+    mode: str = "sync",
+    query_every: int = 1,
+    timeout_s: float = 120.0,
+    student=None,
+    dataset=None,
+    teacher_rate: float = 0.002,
+    gate: float = 0.8,
+    refit_every: int = 256,
+    fit_steps: int = 100,
+    refit_growth: float = 0.0,
+    wait_teacher: bool = False,
+    teacher_batch: int = 16,
+    max_failure_rate: float = 0.5,
+    failure_window: int = 200,
+) -> PAREVecEnv:
+    """PARE over ``venv`` as training builds it, from a pare settings section."""
+    settings = PareSettings(
+        mode=mode, query_every=query_every, timeout_s=timeout_s, student_gate=gate,
+        student_fit_steps=fit_steps, student_refit_growth=refit_growth,
+        student_wait_teacher=wait_teacher, max_failure_rate=max_failure_rate,
+        failure_window=failure_window,
+    )  # fmt: skip
+    advice = PirlAdvice(advisor, student, dataset, teacher_rate, teacher_batch, "")
+    return PAREVecEnv.from_settings(venv, settings, advice, refit_every=refit_every)
+
+
 def _rollout(pare: PAREVecEnv, steps: int, seed: int = 0, pause: float = 0.0):
     rng = np.random.default_rng(seed)
     pare.reset()
@@ -58,7 +89,7 @@ def _rollout(pare: PAREVecEnv, steps: int, seed: int = 0, pause: float = 0.0):
 def test_sync_reward_is_base_reward_plus_weighted_alignment():
     n = 3
     plain = make_vec_env(n, seed=5, **SETTINGS)
-    pare = PAREVecEnv(make_vec_env(n, seed=5, **SETTINGS), OracleAdvisor(), mode="sync")
+    pare = make_pare(make_vec_env(n, seed=5, **SETTINGS), OracleAdvisor(), mode="sync")
     rng = np.random.default_rng(1)
     plain.reset()
     pare.reset()
@@ -96,7 +127,7 @@ def test_sync_reward_is_base_reward_plus_weighted_alignment():
 
 
 def test_query_every_k_reuses_advice_as_stale():
-    pare = PAREVecEnv(make_vec_env(2, seed=1, **SETTINGS), OracleAdvisor(), query_every=4)
+    pare = make_pare(make_vec_env(2, seed=1, **SETTINGS), OracleAdvisor(), query_every=4)
     statuses = [
         (infos[0]["pare"]["status"], infos[0]["pare"]["staleness"])
         for _, _, _, infos in _rollout(pare, 12)
@@ -107,7 +138,7 @@ def test_query_every_k_reuses_advice_as_stale():
 
 def test_async_never_waits_and_reports_staleness():
     delay, pause = 0.25, 0.03
-    pare = PAREVecEnv(make_vec_env(2, seed=2, **SETTINGS), SlowOracle(delay), mode="async")
+    pare = make_pare(make_vec_env(2, seed=2, **SETTINGS), SlowOracle(delay), mode="async")
     start = time.perf_counter()
     steps = _rollout(pare, 40, pause=pause)
     elapsed = time.perf_counter() - start
@@ -121,7 +152,7 @@ def test_async_never_waits_and_reports_staleness():
 
 
 def test_sync_timeout_counts_late_and_goes_on():
-    pare = PAREVecEnv(
+    pare = make_pare(
         make_vec_env(2, seed=3, **SETTINGS), SlowOracle(0.5), mode="sync", timeout_s=0.05
     )
     steps = _rollout(pare, 3)
@@ -134,7 +165,7 @@ def test_sync_timeout_counts_late_and_goes_on():
 
 def test_unparseable_answers_give_zero_and_are_counted():
     plain = make_vec_env(2, seed=4, **SETTINGS)
-    pare = PAREVecEnv(make_vec_env(2, seed=4, **SETTINGS), Unreadable(), mode="sync")
+    pare = make_pare(make_vec_env(2, seed=4, **SETTINGS), Unreadable(), mode="sync")
     plain.reset()
     pare.reset()
     rng = np.random.default_rng(0)
@@ -150,7 +181,7 @@ def test_unparseable_answers_give_zero_and_are_counted():
 
 def test_advice_from_an_ended_episode_is_not_used():
     settings = dict(SETTINGS, max_steps=5, scale_by_alpha=False)
-    pare = PAREVecEnv(make_vec_env(1, seed=6, **settings), OracleAdvisor(), query_every=3)
+    pare = make_pare(make_vec_env(1, seed=6, **settings), OracleAdvisor(), query_every=3)
     for _, _, dones, infos in _rollout(pare, 12):
         if infos[0]["steps"] == 1:  # first step of an episode uses that episode's advice
             assert infos[0]["pare"]["status"] == "fresh"
@@ -160,11 +191,11 @@ def test_advice_from_an_ended_episode_is_not_used():
 
 def test_wrapper_refuses_wrong_set_up():
     with pytest.raises(ConfigError, match="llm_weight=True"):
-        PAREVecEnv(make_vec_env(1, size=(10, 10, 3)), OracleAdvisor())
+        make_pare(make_vec_env(1, size=(10, 10, 3)), OracleAdvisor())
     with pytest.raises(ConfigError, match="mode"):
-        PAREVecEnv(make_vec_env(1, **SETTINGS), OracleAdvisor(), mode="later")
+        make_pare(make_vec_env(1, **SETTINGS), OracleAdvisor(), mode="later")
     with pytest.raises(ConfigError, match="query_every"):
-        PAREVecEnv(make_vec_env(1, **SETTINGS), OracleAdvisor(), query_every=0)
+        make_pare(make_vec_env(1, **SETTINGS), OracleAdvisor(), query_every=0)
 
 
 def test_weights_of_the_llm_term():

@@ -7,30 +7,38 @@ so every caller shows an advisor the same thing.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
+import numpy as np
+
 from pirl.advice.prompt import PromptState, build_prompt
-from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
 
 def prompt_state(world: WorldBatch, e: int) -> PromptState:
     """The :class:`~pirl.advice.prompt.PromptState` of world ``e`` now."""
-    row = world.ints[e]
-    cfg = world.cfg
-    coverable = int(row[D.COVERABLE])
+    return view_prompt_state(WorldView.of(world, e))
+
+
+def view_prompt_state(view: WorldView) -> PromptState:
+    """The :class:`~pirl.advice.prompt.PromptState` of a world's :class:`WorldView`."""
+    cfg = view.cfg
+    # Views are booked on coverable cells only, so the seen cells are the covered ones.
+    coverable = int(np.count_nonzero(view.coverable))
+    covered = int(np.count_nonzero(view.views))
     obstacles = tuple(
-        (float(cx), float(cy), float(cz), float(r)) for cx, cy, cz, r in world.obstacle_list(e)
+        (float(cx), float(cy), float(cz), float(r)) for cx, cy, cz, r in view.obstacles
     )
+    tilt, pan, zoom10 = view.camera
     return PromptState(
-        position=(int(row[D.PX]), int(row[D.PY]), int(row[D.PZ])),
-        tilt=int(row[D.TILT]),
-        pan=int(row[D.PAN]),
-        zoom=int(row[D.ZOOM]) / 10.0,
-        battery=world.battery(e),
-        coverage=int(row[D.COVERED]) / coverable if coverable else 1.0,
+        position=tuple(int(v) for v in view.position),
+        tilt=int(tilt),
+        pan=int(pan),
+        zoom=int(zoom10) / 10.0,
+        battery=max(0.0, float(view.energy) / float(cfg.capacity)),
+        coverage=covered / coverable if coverable else 1.0,
         size=cfg.size,
         footprint=cfg.footprint,
         fov_deg=cfg.fov_deg,
@@ -50,12 +58,19 @@ def advice_requests(
 
     Pass both to ``advisor.advise(prompts, views)``.
     """
-    indices = [int(e) for e in worlds]
-    prompts = [build_prompt(prompt_state(world, e), prompt_variant, decimals) for e in indices]
-    views = None
-    if getattr(advisor, "wants_view", False):
-        views = [WorldView.of(world, e, copy=True) for e in indices]
-    return prompts, views
+    copy = bool(getattr(advisor, "wants_view", False))
+    views = [WorldView.of(world, int(e), copy=copy) for e in worlds]
+    return view_requests(views, advisor, prompt_variant, decimals)
 
 
-__all__ = ["advice_requests", "prompt_state"]
+def view_requests(
+    views: Sequence[WorldView], advisor: Any, prompt_variant: str = "paper", decimals: int = 2
+) -> tuple[list[str], list[WorldView] | None]:
+    """Prompts for worlds seen through their views, plus the views themselves when
+    ``advisor.wants_view`` (then they must be frozen copies: the advisor reads them later,
+    in another thread)."""
+    prompts = [build_prompt(view_prompt_state(v), prompt_variant, decimals) for v in views]
+    return prompts, (list(views) if getattr(advisor, "wants_view", False) else None)
+
+
+__all__ = ["advice_requests", "prompt_state", "view_prompt_state", "view_requests"]

@@ -69,10 +69,16 @@ MIN_HELDOUT = 20
 def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) -> np.ndarray:
     """Features of ``worlds`` (rows of ``obs`` are their observations now), float32."""
     rows = np.asarray(worlds, dtype=np.int64)
-    out = np.empty((len(rows), obs.shape[1] + N_EXTRA), dtype=np.float32)
+    return pose_features(obs, world.cfg.size, world.ints[rows, D.PX : D.PZ + 1])
+
+
+def pose_features(obs: np.ndarray, size: Sequence[int], positions: np.ndarray) -> np.ndarray:
+    """Features from observations (one row per world), the grid size and the worlds'
+    positions (n, 3), float32."""
+    out = np.empty((len(positions), obs.shape[1] + N_EXTRA), dtype=np.float32)
     out[:, : obs.shape[1]] = obs
-    out[:, obs.shape[1] : obs.shape[1] + 3] = np.asarray(world.cfg.size, dtype=np.float32) / 64.0
-    out[:, obs.shape[1] + 3 :] = world.ints[rows, D.PX : D.PZ + 1] / 64.0
+    out[:, obs.shape[1] : obs.shape[1] + 3] = np.asarray(size, dtype=np.float32) / 64.0
+    out[:, obs.shape[1] + 3 :] = positions / 64.0
     return out
 
 
@@ -465,6 +471,7 @@ __all__ = [
     "decode",
     "default_dataset_path",
     "encode",
+    "pose_features",
     "student_features",
     "teacher_key",
 ]

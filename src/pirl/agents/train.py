@@ -43,7 +43,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
-from pirl.pare.wrapper import AdvisorFailing
+from pirl.pare.stats import AdvisorFailing
 
 PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
 EPISODE_COLUMNS = (
@@ -171,22 +171,13 @@ def build_env_stack(
     pare = None
     inner = venv
     if method == "pirl":
-        from pirl.pare.wrapper import PAREVecEnv
+        from pirl.pare.vec_env import PAREVecEnv
 
         if advice is None:
             raise ConfigError("pirl needs an advisor")
-        p = cfg.pare
-        pare = PAREVecEnv(
-            venv, advice.advisor, query_every=p.query_every, mode=p.mode, lam_cam=p.lam_cam,
-            lam_move=p.lam_move, alpha=p.alpha, timeout_s=p.timeout_s,
-            prompt_variant=p.prompt_variant, student=advice.student, dataset=advice.dataset,
-            teacher_rate=advice.teacher_rate, gate=p.student_gate, refit_every=cfg.ppo.n_steps,
-            fit_steps=p.student_fit_steps, refit_growth=p.student_refit_growth,
-            wait_teacher=p.student_wait_teacher,
-            teacher_batch=advice.teacher_batch,
-            max_failure_rate=p.max_failure_rate, failure_window=p.failure_window,
-            label=advice.label, seed=seed, source=source,
-        )  # fmt: skip
+        pare = PAREVecEnv.from_settings(
+            venv, cfg.pare, advice, refit_every=cfg.ppo.n_steps, seed=seed, source=source
+        )
         inner = pare
     return EnvStack(VecMonitor(inner), venv, pare)
 

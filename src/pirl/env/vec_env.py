@@ -14,11 +14,12 @@ from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
+from pirl.env.shaping import ShapingHooks
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
 
 
-class VCPPVecEnv(VecEnv):
+class VCPPVecEnv(ShapingHooks, VecEnv):
     """N VCPP worlds on batched numpy arrays (see :class:`pirl.env.vcpp_env.VCPPEnv`).
 
     World ``i`` seeded with ``s`` behaves exactly like a single ``VCPPEnv`` reset with seed
@@ -26,6 +27,9 @@ class VCPPVecEnv(VecEnv):
     when a world ends, ``infos[i]["terminal_observation"]`` holds its last observation,
     ``infos[i]["TimeLimit.truncated"]`` tells truncation, and the returned observation is the
     first one of the next episode.
+
+    Reward wrappers such as PARE use the public hooks of
+    :class:`~pirl.env.shaping.ShapingHooks`.
     """
 
     def __init__(

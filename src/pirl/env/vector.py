@@ -19,14 +19,15 @@ from gymnasium.vector.utils import batch_space
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
-from pirl.env.info import LazyVectorInfo
+from pirl.env.info import InfoSnapshot, LazyVectorInfo
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
+from pirl.env.shaping import ShapingHooks
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
 
 
-class VCPPVectorEnv(VectorEnv):
+class VCPPVectorEnv(ShapingHooks, VectorEnv):
     """N VCPP worlds stepped at once (see :class:`pirl.env.vcpp_env.VCPPEnv` for the task).
 
     ## Vectorization
@@ -49,6 +50,9 @@ class VCPPVectorEnv(VectorEnv):
     ended. It is built on first read, so a loop that ignores it pays nothing for it.
 
     ``copy=False`` returns the observation buffer itself, which the next step overwrites.
+
+    Reward wrappers such as PARE use the public hooks of
+    :class:`~pirl.env.shaping.ShapingHooks`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -80,6 +84,7 @@ class VCPPVectorEnv(VectorEnv):
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
         self._n_autoreset = 0
         self._paths: list[list[tuple[int, int, int]]] = [[] for _ in range(num_envs)]
+        self.step_snapshot: InfoSnapshot | None = None
 
     @property
     def world(self):
@@ -140,7 +145,9 @@ class VCPPVectorEnv(VectorEnv):
         if self.render_mode is not None:
             for e in range(self.num_envs):
                 self._paths[e].append(self.world.position(e))
-        info = LazyVectorInfo(core.infos_snapshot())
+        # Kept for the shaping hooks: a wrapper may still add to this step's info.
+        self.step_snapshot = core.infos_snapshot()
+        info = LazyVectorInfo(self.step_snapshot)
         return self._obs(), core.rewards.copy(), terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:

@@ -20,9 +20,9 @@ import numpy as np
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.budget import BUDGET_EXHAUSTED
 from pirl.advice.factory import exhausted
-from pirl.advice.state import advice_requests
 from pirl.advice.student import TeacherDataset, encode
-from pirl.world.state import WorldBatch
+from pirl.env.shaping import ShapingHooks
+from pirl.pare.asking import requests
 
 
 @dataclass
@@ -81,8 +81,11 @@ class TeacherQueue:
         """Whether the teacher's budget is spent (no more calls)."""
         return exhausted(self.advisor)
 
-    def sample(self, world: WorldBatch, features: np.ndarray) -> None:
-        """Draw this step's states (``features``: one row per world, the current states)."""
+    def sample(
+        self, env: ShapingHooks, features: np.ndarray, worlds: np.ndarray | None = None
+    ) -> None:
+        """Draw this step's states (``features``: one row per world of ``worlds``, default
+        all, their current states)."""
         if self.rate <= 0 or self.spent:
             return
         self.credit += self.rate * features.shape[0]
@@ -95,14 +98,13 @@ class TeacherQueue:
         self.skipped += k - max(take, 0)
         if take <= 0:
             return
-        worlds = np.sort(self.rng.choice(features.shape[0], size=take, replace=False))
-        prompts, views = advice_requests(
-            world, worlds, self.advisor, self.prompt_variant, self.decimals
-        )
+        rows = np.sort(self.rng.choice(features.shape[0], size=take, replace=False))
+        asked = rows if worlds is None else worlds[rows]
+        prompts, views = requests(env, asked, self.advisor, self.prompt_variant, self.decimals)
         self._prompts += prompts
         if views is not None:
             self._views += views
-        self._features += [features[e].copy() for e in worlds]
+        self._features += [features[e].copy() for e in rows]
 
     def boundary(self, t: int, wait: bool = False, timeout_s: float = 600.0) -> list[Answer]:
         """At a rollout boundary (step ``t``): collect the finished batch (``wait``: wait for
@@ -126,6 +128,11 @@ class TeacherQueue:
     def in_flight(self) -> int:
         """Prompts sent whose answers have not been collected."""
         return len(self._job[0].prompts) if self._job is not None else 0
+
+    @property
+    def waiting(self) -> int:
+        """Sampled states waiting to be sent."""
+        return len(self._prompts)
 
     def collect_finished(self, t: int) -> list[Answer]:
         """Collect and store the batch in flight if it has finished (never waits)."""
