@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 from typing import Any
 
+from pirl._paths import cache_root
 from pirl.advice.base import Advisor
 
 
 def default_cache_path() -> Path:
-    """``$PIRL_CACHE_DIR/advice.sqlite`` or ``~/.cache/pirl/advice.sqlite``."""
-    base = os.environ.get("PIRL_CACHE_DIR") or Path.home() / ".cache" / "pirl"
-    return Path(base) / "advice.sqlite"
+    """``advice.sqlite`` in the PIRL cache folder (:func:`pirl._paths.cache_root`)."""
+    return cache_root() / "advice.sqlite"
 
 
 def make_advisor(name: str, cfg: Any, cache: bool | None = None, process: bool = False) -> Advisor:
