@@ -281,7 +281,42 @@ def test_grammar_walks_end_in_answers_on_the_grid(advisor: LocalAdvisor) -> None
         assert grid.TILT_MIN <= rec.tilt <= grid.TILT_MAX
         assert grid.ZOOM_RANGE[0] <= rec.zoom <= grid.ZOOM_RANGE[1]
         assert {rec.dx, rec.dy, rec.dz} <= set(grid.MOVE_VALUES)
-    # generate's hook sees the prompt too: it reads only what follows it.
-    allowed_after = grammar.allowed_tokens_fn(3)
-    prompt = torch.tensor([7, 8, 9] + tokens[:2])
-    assert allowed_after(0, prompt) == grammar.allowed(tokens[:2])
+
+
+# Greedy float32 answers to varied_states(6, seed=11) in compact and paper prompts, recorded
+# before the split of local.py (commit 984cd16).
+PINNED_ANSWERS = [
+    "pan: 90, tilt: 90, zoom: 1, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1, X: -1, Y: 0, Z: 0",
+    "pan: 90, tilt: 90, zoom: 1.5, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1.0, X: -1, Y: 0, Z: 0",
+    "pan: 90, tilt: 90, zoom: 1, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1, X: -1, Y: 0, Z: 0",
+]
+
+
+def test_the_decoding_loop_gives_the_answers_of_stock_generate() -> None:
+    from pirl.advice.grammar import PREFILL
+
+    llm = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    states = varied_states(6, seed=11)
+    prompts = [build_prompt(s, v) for s, v in zip(states, ["compact", "paper"] * 3, strict=True)]
+    assert [a.text for a in llm.advise(prompts)] == PINNED_ANSWERS
+    # transformers' own generate under the same grammar, one token per call, no prefix reuse.
+    batch = llm.tokenizer(
+        [llm.chat_text(p) for p in prompts],
+        return_tensors="pt",
+        padding=True,
+        add_special_tokens=False,
+    )
+    width = batch["input_ids"].shape[1]
+    with torch.inference_mode():
+        out = llm.lm.generate(
+            **batch,
+            prefix_allowed_tokens_fn=lambda _, ids: llm.grammar.allowed(ids[width:].tolist()),
+            max_new_tokens=llm.grammar.max_tokens,
+            do_sample=False, temperature=None, top_p=None, top_k=None,
+            pad_token_id=llm.tokenizer.pad_token_id, eos_token_id=llm.grammar.eos,
+        )  # fmt: skip
+    texts = [PREFILL + llm.tokenizer.decode(r[width:], skip_special_tokens=True) for r in out]
+    assert texts == PINNED_ANSWERS

@@ -16,6 +16,7 @@ CORE = [
     "base",
     "budget",
     "cache",
+    "decoding",
     "grammar",
     "local",
     "model_store",

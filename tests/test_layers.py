@@ -18,7 +18,7 @@ PACKAGE = SRC / "pirl"
 # The layers, lowest first; a module may import its own layer and the layers below it. Keep in
 # step with docs/architecture.md.
 LAYERS = (
-    ("pirl", "pirl._numba_cache"),  # the package root: numba cache set-up, env registration
+    ("pirl", "pirl._numba_cache", "pirl._paths"),  # the root: cache folder, numba, env registration
     ("pirl.config",),  # the action grid and the settings every layer reads
     # Grid, scenarios, footprints, rules, metrics, planning queries. physics.config is plain
     # settings (it imports world.config only), so the run config of agents may hold it.

@@ -1,5 +1,5 @@
 """The answer grammar: ``pan: <n>, tilt: <n>, zoom: <n>, X: <n>, Y: <n>, Z: <n>`` as a
-token-level constraint for transformers' ``generate``.
+token-level constraint (decoded by :mod:`pirl.advice.decoding`).
 
 A 135M model does not follow the output format by itself. The answer is prefilled with
 :data:`PREFILL` and decoded under this grammar: the key names and separators are forced, and
@@ -10,13 +10,10 @@ is built from the tokenizer's own pieces, so it works for other tokenizers too.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any
 
 from pirl.config import grid
-
-if TYPE_CHECKING:  # pragma: no cover
-    import torch
 
 __all__ = ["PREFILL", "Grammar", "field_values"]
 
@@ -122,12 +119,3 @@ class Grammar:
         if self._done(field, value):
             options += self.eos if field == last else [self.literals[field + 1][0]]
         return options or self.eos
-
-    def allowed_tokens_fn(self, prompt_width: int) -> Callable[[int, torch.Tensor], list[int]]:
-        """The ``prefix_allowed_tokens_fn`` of ``generate`` for a batch whose input rows are
-        ``prompt_width`` tokens wide (the answer is what follows them)."""
-
-        def allowed_after(batch_id: int, input_ids: torch.Tensor) -> list[int]:
-            return self.allowed(input_ids[prompt_width:].tolist())
-
-        return allowed_after

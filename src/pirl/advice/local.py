@@ -2,16 +2,14 @@
 
 The model comes from :mod:`pirl.advice.model_store` (the embedded SmolLM2-135M-Instruct by
 default); with ``constrained=True`` (default) the answer is prefilled with ``pan:`` and decoded
-by transformers' ``generate`` under the answer grammar of :mod:`pirl.advice.grammar`, so every
-answer parses. The prompts' shared part (everything before the state marker) is run once: its
-key/value cache is kept and handed to ``generate`` for every batch that shares it.
+under the answer grammar of :mod:`pirl.advice.grammar` (by :mod:`pirl.advice.decoding`), so
+every answer parses. The prompts' shared part (everything before the state marker) is run
+once: its key/value cache is kept and decoding starts from it for every batch that shares it.
 """
 
 from __future__ import annotations
 
 import copy
-import functools
-import inspect
 import json
 import os
 import time
@@ -19,6 +17,7 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from pirl.advice.base import Advisor, Answer, error_answer
+from pirl.advice.decoding import cache_of, grammar_decode
 from pirl.advice.grammar import PREFILL, Grammar
 from pirl.advice.model_store import default_dtype, load_model, resolve_model_dir
 from pirl.advice.parser import parse_recommendation
@@ -240,7 +239,7 @@ class LocalAdvisor(Advisor):
                 use_cache=True,
                 logits_to_keep=1,
             )
-            kept = (head_ids, _cache_of(out))
+            kept = (head_ids, cache_of(out))
         self._prefixes[head] = kept  # most recently used last
         while len(self._prefixes) > MAX_PREFIXES:
             self._prefixes.pop(next(iter(self._prefixes)))
@@ -264,55 +263,47 @@ class LocalAdvisor(Advisor):
         pad = self.tokenizer.pad_token_id
         out: list[list[int]] = [[] for _ in rows]
         for head, members in groups.items():
-            shared = heads[head] if head is not None else []
-            tails = [rows[i][len(shared) :] for i in members]
-            width = len(shared) + max(len(t) for t in tails)
-            # The shared prefix, then each row's rest left-padded (masked): generate counts
-            # positions from the mask and runs only the columns after the cached prefix.
+            start = len(heads[head]) if head is not None else 0
+            tails = [rows[i][start:] for i in members]
+            width = max(len(t) for t in tails)
             ids = torch.full((len(members), width), pad, dtype=torch.long)
             mask = torch.zeros((len(members), width), dtype=torch.long)
-            ids[:, : len(shared)] = torch.tensor(shared, dtype=torch.long)
-            mask[:, : len(shared)] = 1
-            for k, tail in enumerate(tails):
+            for k, tail in enumerate(tails):  # left-padded after the shared prefix, masked
                 ids[k, width - len(tail) :] = torch.tensor(tail)
                 mask[k, width - len(tail) :] = 1
             with torch.inference_mode():
-                past = self._prefix_cache(head, shared, len(members)) if head else None
-            answers = self._decode(ids.to(self.device), mask.to(self.device), past)
+                past = self._prefix_cache(head, heads[head], len(members)) if head else None
+            answers = self._decode(ids.to(self.device), mask.to(self.device), past, start)
             for i, tokens in zip(members, answers, strict=True):
                 out[i] = tokens
         return out
 
-    def _decode(self, ids: torch.Tensor, mask: torch.Tensor, past: Any = None) -> list[list[int]]:
-        """``generate`` on a left-padded batch (under the grammar when constrained); each
-        row's answer tokens up to its end token. ``past``: the key/value cache of the first
-        columns, which every row shares, one row per prompt."""
+    def _decode(
+        self, ids: torch.Tensor, mask: torch.Tensor, past: Any = None, past_len: int = 0
+    ) -> list[list[int]]:
+        """Each row's answer tokens for a left-padded batch, up to its end token: under the
+        grammar (:func:`~pirl.advice.decoding.grammar_decode`, after ``past``, the key/value
+        cache of ``past_len`` tokens every row shares) or by plain ``generate``."""
         import torch
 
-        eos = _as_list(self.tokenizer.eos_token_id)
+        if self.grammar is not None:
+            with torch.inference_mode():
+                return grammar_decode(
+                    self.lm, self.grammar, ids, mask, self.tokenizer.pad_token_id,
+                    self.temperature, self.top_p, past=past, past_len=past_len,
+                )  # fmt: skip
         kwargs: dict[str, Any] = {
             "pad_token_id": self.tokenizer.pad_token_id,
             "eos_token_id": self.tokenizer.eos_token_id,
             "max_new_tokens": self.max_new_tokens,
         }
-        if self.grammar is not None:
-            eos = self.grammar.eos
-            kwargs.update(
-                eos_token_id=eos,
-                max_new_tokens=self.grammar.max_tokens,
-                prefix_allowed_tokens_fn=self.grammar.allowed_tokens_fn(ids.shape[1]),
-            )
         if self.temperature > 0:
             kwargs.update(do_sample=True, temperature=self.temperature, top_p=self.top_p)
-            if self.grammar is not None:
-                kwargs["top_k"] = 0  # sample among every allowed token, as the grammar says
         else:
             kwargs.update(do_sample=False, temperature=None, top_p=None, top_k=None)
-        if past is not None:
-            kwargs[_cache_argument(type(self.lm))] = past
         with torch.inference_mode():
             output = self.lm.generate(input_ids=ids, attention_mask=mask, **kwargs)
-        stop = set(eos) | {self.tokenizer.pad_token_id}
+        stop = set(_as_list(self.tokenizer.eos_token_id)) | {self.tokenizer.pad_token_id}
         return [_until(row, stop) for row in output[:, ids.shape[1] :].tolist()]
 
     def __repr__(self) -> str:
@@ -320,23 +311,6 @@ class LocalAdvisor(Advisor):
             f"LocalAdvisor(model={str(self.model_dir)!r}, device={self.device!r}, "
             f"constrained={self.constrained})"
         )
-
-
-@functools.lru_cache(maxsize=8)
-def _cache_argument(model_class: type) -> str:
-    """The argument that takes a key/value cache: ``cache`` in transformers >= 5.2x,
-    ``past_key_values`` before (now deprecated)."""
-    return (
-        "cache"
-        if "cache" in inspect.signature(model_class.forward).parameters
-        else ("past_key_values")
-    )
-
-
-def _cache_of(out: Any) -> Any:
-    """The key/value cache of a model output, under either name."""
-    # Not .get(): reading the old name eagerly raises a deprecation warning.
-    return out["cache"] if "cache" in out else out.past_key_values  # noqa: SIM401
 
 
 def _as_list(value: int | Iterable[int] | None) -> list[int]:
