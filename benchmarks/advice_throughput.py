@@ -18,12 +18,23 @@ training rollouts, batches of ``--batch``): first on one core alone, then beside
 ``--workers`` PPO training processes (the demo's conditions). It prints parse rate and answer
 distribution of both and ends with ``prefix reuse: A answers/s, without: B answers/s,
 speed-up C.Cx`` (the figures beside the workers when there are any).
+
+``--against REV`` measures instead the embedded teacher of this code against the one of git
+revision ``REV`` (its ``src`` exported to a temporary folder), each in child processes that
+alternate on the same prompts (states of training rollouts, ``--prompts`` of them per
+``--variants`` entry, batches of ``--batch``, ``--rounds`` passes each, ``--dtype``): answers
+per second of each, and the share of identical answer texts. It ends with ``this code: A
+answers/s, REV: B answers/s, ratio C.CCx``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing as mp
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from collections import Counter
@@ -32,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from pirl.advice.cache import CachedAdvisor
-from pirl.advice.local import LocalAdvisor, _common_length
+from pirl.advice.local import LocalAdvisor
+from pirl.advice.model_store import default_dtype
 from pirl.advice.prompt import build_prompt
 from pirl.advice.state import prompt_state
 from pirl.agents.pirl_advice import PirlAdvice
@@ -123,6 +135,85 @@ def _train_forever(out: str, seed: int) -> None:
     cfg = RunConfig.from_yaml(root / "configs" / "quick.yaml")
     cfg = cfg.with_overrides(train={"total_steps": 50_000_000, "checkpoint_every": 10**9})
     train("ppo-ewri", cfg, Path(out) / f"w{seed}", seed=seed, show_progress=False)
+
+
+def _common_length(rows: list[list[int]]) -> int:
+    """Length of the token prefix all ``rows`` share."""
+    first, n = rows[0], min(len(r) for r in rows)
+    for i in range(n):
+        if any(r[i] != first[i] for r in rows):
+            return i
+    return n
+
+
+# Runs in a child process on either revision's code: only LocalAdvisor's public API.
+_DECODER_CHILD = """
+import json, sys, time
+from pirl.advice.local import LocalAdvisor
+job = json.load(open(sys.argv[1]))
+llm = LocalAdvisor(num_threads=job["threads"], batch_size=job["batch"], dtype=job["dtype"])
+prompts = job["prompts"]
+llm.advise(prompts[: job["batch"]])  # warm-up: first calls are slower
+start = time.perf_counter()
+answers = llm.advise(prompts)
+seconds = time.perf_counter() - start
+print(json.dumps({"seconds": seconds, "texts": [a.text for a in answers],
+                  "parsed": sum(a.recommendation is not None for a in answers)}))
+"""
+
+
+def _decoder_run(src: str, job_file: str) -> dict:
+    """One child process of the code in ``src`` answering the prompts of ``job_file``."""
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=src, PYTHONWARNINGS="ignore")
+    out = subprocess.run(
+        [sys.executable, "-c", _DECODER_CHILD, job_file],
+        capture_output=True, text=True, env=env, cwd=root, check=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def against_main(args: argparse.Namespace) -> None:
+    """This code's embedded teacher against revision ``args.against``'s, alternating."""
+    root = Path(__file__).resolve().parents[1]
+    dtype = args.dtype or default_dtype("cpu")
+    with tempfile.TemporaryDirectory(prefix="pirl-old-") as folder:
+        archive = subprocess.run(
+            ["git", "archive", args.against, "src"], cwd=root, capture_output=True, check=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", folder], input=archive, check=True)
+        codes = {"this code": str(root / "src"), args.against: str(Path(folder) / "src")}
+        prompts = [p for v in args.variants for p in rollout_prompts(args.prompts, v)]
+        job = {"threads": args.threads, "batch": args.batch, "dtype": dtype, "prompts": prompts}
+        job_file = Path(folder) / "job.json"
+        job_file.write_text(json.dumps(job))
+        seconds = dict.fromkeys(codes, 0.0)
+        texts: dict[str, list[str]] = {c: [] for c in codes}
+        parsed = dict.fromkeys(codes, 0)
+        for r in range(args.rounds):
+            order = list(codes) if r % 2 == 0 else list(codes)[::-1]  # the load drifts
+            for code in order:
+                got = _decoder_run(codes[code], str(job_file))
+                seconds[code] += got["seconds"]
+                texts[code] += got["texts"]
+                parsed[code] += got["parsed"]
+    n = len(prompts) * args.rounds
+    print(
+        f"embedded teacher, {len(prompts)} prompts ({', '.join(args.variants)}) x "
+        f"{args.rounds} rounds, batches of {args.batch}, {dtype}, {args.threads} thread(s)"
+    )
+    for code in codes:
+        answers = Counter(texts[code])
+        top = ", ".join(f"{k}x '{t}'" for t, k in answers.most_common(2))
+        print(
+            f"  {code:<10} {n / seconds[code]:.2f} answers/s, parse rate {parsed[code] / n:.0%}, "
+            f"{len(answers)} distinct answers; most frequent: {top}"
+        )
+    this, old = codes
+    same = sum(a == b for a, b in zip(texts[this], texts[old], strict=True))
+    print(f"  same answer text: {same / n:.0%} of {n}")
+    a, b = n / seconds[this], n / seconds[old]
+    print(f"this code: {a:.2f} answers/s, {old}: {b:.2f} answers/s, ratio {a / b:.2f}x")
 
 
 def prefix_rates(llm: LocalAdvisor, prompts: list[str], batch: int, rounds: int) -> dict:
@@ -230,7 +321,12 @@ def main() -> None:
     parser.add_argument(
         "--variants", nargs="+", default=["compact", "paper"], help="--prefix-reuse: prompts"
     )
+    parser.add_argument("--against", metavar="REV", help="measure the teacher against REV")
+    parser.add_argument("--dtype", default=None, help="--against: torch dtype of both")
     args = parser.parse_args()
+    if args.against:
+        against_main(args)
+        return
     if args.prefix_reuse:
         prefix_main(args)
         return

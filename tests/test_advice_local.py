@@ -17,15 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from pirl.advice import Answer, CachedAdvisor, PromptState, build_prompt
-from pirl.advice.local import (
-    MARKER,
-    MAX_PREFIXES,
-    LocalAdvisor,
-    build_folder,
-    embedded_gguf_path,
-    resolve_model_dir,
-)
+from pirl.advice import Answer, CachedAdvisor, PromptState, build_prompt, parse_recommendation
+from pirl.advice.local import MAX_PREFIXES, LocalAdvisor
+from pirl.advice.model_store import MARKER, build_folder, embedded_gguf_path, resolve_model_dir
 from pirl.advice.prompt import STATE_MARKER
 
 torch = pytest.importorskip("torch")
@@ -181,7 +175,7 @@ RACER = textwrap.dedent(
     """
     import os, sys, time
     from pathlib import Path
-    from pirl.advice.local import build_folder
+    from pirl.advice.model_store import build_folder
 
     def build(tmp: Path) -> dict:
         time.sleep(0.3)  # long enough for every racer to be building at once
@@ -240,3 +234,89 @@ def test_prefix_reuse_gives_the_answers_of_a_whole_prefill() -> None:
     distinct = {p[: p.index(STATE_MARKER)] for p in prompts if STATE_MARKER in p}
     assert len(heads) == min(len(distinct), MAX_PREFIXES)
     assert not whole._prefixes
+
+
+def test_one_function_resolves_the_cache_folder(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from pirl._paths import cache_root
+    from pirl.advice.factory import default_cache_path
+    from pirl.advice.student import default_dataset_path
+
+    monkeypatch.setenv("PIRL_CACHE_DIR", str(tmp_path))
+    assert cache_root() == tmp_path
+    assert default_cache_path() == tmp_path / "advice.sqlite"
+    assert default_dataset_path() == tmp_path / "student.sqlite"
+    assert cache_root(tmp_path / "other") == tmp_path / "other"
+    monkeypatch.setenv("PIRL_CACHE_DIR", "")  # empty counts as unset
+    assert cache_root() == Path.home() / ".cache" / "pirl"
+    monkeypatch.setenv("PIRL_CACHE_DIR", "~/pirl-cache")
+    assert cache_root() == Path.home() / "pirl-cache"
+    # No other module reads the variable: a new user of the cache calls cache_root().
+    src = Path(__file__).resolve().parents[1] / "src" / "pirl"
+    readers = sorted(
+        str(p.relative_to(src)) for p in src.rglob("*.py") if 'PIRL_CACHE_DIR"' in p.read_text()
+    )
+    assert readers == ["_paths.py"]
+
+
+def test_grammar_walks_end_in_answers_on_the_grid(advisor: LocalAdvisor) -> None:
+    from pirl.advice.grammar import PREFILL, Grammar
+    from pirl.config import grid
+
+    grammar = Grammar(advisor.tokenizer)
+    rng = random.Random(0)
+    for _ in range(40):  # random walks through the grammar: every one is a valid answer
+        tokens: list[int] = []
+        while True:
+            token = rng.choice(grammar.allowed(tokens))
+            if token in grammar.eos:
+                break
+            tokens.append(token)
+            assert len(tokens) < grammar.max_tokens
+        text = PREFILL + advisor.tokenizer.decode(tokens)
+        rec = parse_recommendation(text)
+        assert rec is not None, text
+        assert grid.PAN_MIN <= rec.pan <= grid.PAN_MAX
+        assert grid.TILT_MIN <= rec.tilt <= grid.TILT_MAX
+        assert grid.ZOOM_RANGE[0] <= rec.zoom <= grid.ZOOM_RANGE[1]
+        assert {rec.dx, rec.dy, rec.dz} <= set(grid.MOVE_VALUES)
+
+
+# Greedy float32 answers to varied_states(6, seed=11) in compact and paper prompts, recorded
+# before the split of local.py (commit 984cd16).
+PINNED_ANSWERS = [
+    "pan: 90, tilt: 90, zoom: 1, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1, X: -1, Y: 0, Z: 0",
+    "pan: 90, tilt: 90, zoom: 1.5, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1.0, X: -1, Y: 0, Z: 0",
+    "pan: 90, tilt: 90, zoom: 1, X: 1, Y: 1, Z: 1",
+    "pan: 75, tilt: 45, zoom: 1, X: -1, Y: 0, Z: 0",
+]
+
+
+def test_the_decoding_loop_gives_the_answers_of_stock_generate() -> None:
+    from pirl.advice.grammar import PREFILL
+
+    llm = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    states = varied_states(6, seed=11)
+    prompts = [build_prompt(s, v) for s, v in zip(states, ["compact", "paper"] * 3, strict=True)]
+    assert [a.text for a in llm.advise(prompts)] == PINNED_ANSWERS
+    # transformers' own generate under the same grammar, one token per call, no prefix reuse.
+    batch = llm.tokenizer(
+        [llm.chat_text(p) for p in prompts],
+        return_tensors="pt",
+        padding=True,
+        add_special_tokens=False,
+    )
+    width = batch["input_ids"].shape[1]
+    with torch.inference_mode():
+        out = llm.lm.generate(
+            **batch,
+            prefix_allowed_tokens_fn=lambda _, ids: llm.grammar.allowed(ids[width:].tolist()),
+            max_new_tokens=llm.grammar.max_tokens,
+            do_sample=False, temperature=None, top_p=None, top_k=None,
+            pad_token_id=llm.tokenizer.pad_token_id, eos_token_id=llm.grammar.eos,
+        )  # fmt: skip
+    texts = [PREFILL + llm.tokenizer.decode(r[width:], skip_special_tokens=True) for r in out]
+    assert texts == PINNED_ANSWERS

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from pirl.advice import PromptState, build_prompt
-from pirl.advice.local import resolve_model_dir
+from pirl.advice.model_store import resolve_model_dir
 from pirl.advice.openai_advisor import OpenAIAdvisor
 
 SECRET = "sk-test-DoNotLeak0123456789"

@@ -13,6 +13,8 @@ import os
 import shutil
 from pathlib import Path
 
+from pirl._paths import cache_root
+
 _KERNEL_PACKAGES = ("world", "env", "pare", "physics")
 _KEEP = 3
 
@@ -27,10 +29,7 @@ def configure() -> Path | None:
         for path in sorted((root / package).rglob("*.py")):
             digest.update(path.name.encode())
             digest.update(path.read_bytes())
-    base = Path(
-        os.environ.get("PIRL_NUMBA_CACHE")
-        or Path(os.environ.get("PIRL_CACHE_DIR", Path.home() / ".cache" / "pirl")) / "numba"
-    )
+    base = Path(os.environ.get("PIRL_NUMBA_CACHE") or cache_root() / "numba")
     folder = base / digest.hexdigest()[:16]
     try:
         folder.mkdir(parents=True, exist_ok=True)

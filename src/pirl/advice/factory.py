@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 from typing import Any
 
+from pirl._paths import cache_root
 from pirl.advice.base import Advisor
 from pirl.config.run import RunConfig
 
 
 def default_cache_path() -> Path:
-    """``$PIRL_CACHE_DIR/advice.sqlite`` or ``~/.cache/pirl/advice.sqlite``."""
-    base = os.environ.get("PIRL_CACHE_DIR") or Path.home() / ".cache" / "pirl"
-    return Path(base) / "advice.sqlite"
+    """``advice.sqlite`` in the PIRL cache folder (:func:`pirl._paths.cache_root`)."""
+    return cache_root() / "advice.sqlite"
 
 
 def make_advisor(

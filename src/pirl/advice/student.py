@@ -40,6 +40,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from pirl._paths import cache_root
 from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
@@ -117,9 +118,8 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
 
 
 def default_dataset_path() -> Path:
-    """``$PIRL_CACHE_DIR/student.sqlite`` or ``~/.cache/pirl/student.sqlite``."""
-    base = os.environ.get("PIRL_CACHE_DIR") or Path.home() / ".cache" / "pirl"
-    return Path(base) / "student.sqlite"
+    """``student.sqlite`` in the PIRL cache folder (:func:`pirl._paths.cache_root`)."""
+    return cache_root() / "student.sqlite"
 
 
 _SCHEMA = [
