@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from pirl.config.errors import ConfigError
+from pirl.config.run import PareSettings
 from pirl.env.shaping import ShapingHooks
 from pirl.pare.board import AdviceBoard
 from pirl.pare.core import Shaped, Weights, add_llm_term, shape
@@ -58,7 +59,7 @@ class PARE:
     def from_settings(
         cls,
         env: ShapingHooks,
-        settings: Any,
+        settings: PareSettings,
         advice: Any,
         refit_every: int = 256,
         seed: int = 0,
