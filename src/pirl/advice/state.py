@@ -11,26 +11,25 @@ from collections.abc import Iterable
 from typing import Any
 
 from pirl.advice.prompt import PromptState, build_prompt
-from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
 
 def prompt_state(world: WorldBatch, e: int) -> PromptState:
     """The :class:`~pirl.advice.prompt.PromptState` of world ``e`` now."""
-    row = world.ints[e]
+    row = world.status[e]
     cfg = world.cfg
-    coverable = int(row[D.COVERABLE])
+    coverable = int(row["coverable"])
     obstacles = tuple(
         (float(cx), float(cy), float(cz), float(r)) for cx, cy, cz, r in world.obstacle_list(e)
     )
     return PromptState(
-        position=(int(row[D.PX]), int(row[D.PY]), int(row[D.PZ])),
-        tilt=int(row[D.TILT]),
-        pan=int(row[D.PAN]),
-        zoom=int(row[D.ZOOM]) / 10.0,
+        position=world.position(e),
+        tilt=int(row["tilt"]),
+        pan=int(row["pan"]),
+        zoom=int(row["zoom10"]) / 10.0,
         battery=world.battery(e),
-        coverage=int(row[D.COVERED]) / coverable if coverable else 1.0,
+        coverage=int(row["covered"]) / coverable if coverable else 1.0,
         size=cfg.size,
         footprint=cfg.footprint,
         fov_deg=cfg.fov_deg,

@@ -44,7 +44,6 @@ from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.config import grid
-from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
 FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
@@ -72,7 +71,7 @@ def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) 
     out = np.empty((len(rows), obs.shape[1] + N_EXTRA), dtype=np.float32)
     out[:, : obs.shape[1]] = obs
     out[:, obs.shape[1] : obs.shape[1] + 3] = np.asarray(world.cfg.size, dtype=np.float32) / 64.0
-    out[:, obs.shape[1] + 3 :] = world.ints[rows, D.PX : D.PZ + 1] / 64.0
+    out[:, obs.shape[1] + 3 :] = world.positions(rows) / 64.0
     return out
 
 

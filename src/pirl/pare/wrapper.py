@@ -93,9 +93,10 @@ def _shape(p_t, after, rec, meta, t, consts, weights, llm_col, rewards, terms, t
     cam_next = np.empty((n, 3))
     d_max, alpha, lam_cam, lam_move = consts[0], consts[1], consts[2], consts[3]
     for e in range(n):
-        p_next[e, 0], p_next[e, 1], p_next[e, 2] = after[e, D.PX], after[e, D.PY], after[e, D.PZ]
-        cam_next[e, 0], cam_next[e, 1] = after[e, D.TILT], after[e, D.PAN]
-        cam_next[e, 2] = after[e, D.ZOOM] / 10.0
+        st = after[e]
+        p_next[e, 0], p_next[e, 1], p_next[e, 2] = st["x"], st["y"], st["z"]
+        cam_next[e, 0], cam_next[e, 1] = st["tilt"], st["pan"]
+        cam_next[e, 2] = st["zoom10"] / 10.0
         if meta[e, HAS] == 0:
             for k in range(5):
                 table[e, k] = 0.0
@@ -484,7 +485,7 @@ class PAREVecEnv(VecEnvWrapper):
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._p_t[:] = self._world.ints[:, D.PX : D.PZ + 1]
+        self._p_t[:] = self._world.positions()
         self.venv.step_async(actions)
 
     def step_wait(self):
@@ -497,7 +498,7 @@ class PAREVecEnv(VecEnvWrapper):
         snap = self.venv.step_snapshot
         table, status, staleness = self._table, self._status, self._staleness
         _shape(
-            self._p_t, snap.ints, self._rec, self._meta, self._t, self._consts, snap.weights,
+            self._p_t, snap.status, self._rec, self._meta, self._t, self._consts, snap.weights,
             D.T_LLM, rewards, snap.terms, table, status, staleness, self._counts,
         )  # fmt: skip
         # Copies: the lazy infos read them later, after these buffers moved on.
