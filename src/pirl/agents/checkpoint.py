@@ -23,6 +23,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.env.vec_env import VCPPVecEnv
+from pirl.world.config import ConfigError
 
 
 def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:
@@ -140,6 +141,11 @@ def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
                 log(f"resume: checkpoint {path} is damaged ({type(exc).__name__}); skipping it")
             continue
         if isinstance(state, dict) and "num_timesteps" in state:
+            if "env" not in state:
+                raise ConfigError(
+                    f"resume: checkpoint {path} was written by an older pirl (world arrays "
+                    "before the named world state); resume it with that version or start anew"
+                )
             return path, state
     return None
 
