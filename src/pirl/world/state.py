@@ -13,7 +13,7 @@ per world, so a world reset with seed s is the same whether it lives alone or in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -68,9 +68,9 @@ lookups and scratch space derived from the config."""
 
 
 def copy_records(records: np.ndarray) -> np.ndarray:
-    """A copy of a 1-D record array, made as bytes: numpy copies records field by field, ten
-    times slower (measured on 64 worlds), and infos copy them at every step."""
-    return records.view(np.uint8).copy().view(records.dtype)
+    """A read-only copy of a 1-D record array, made as bytes: numpy copies records field by
+    field, ten times slower, and every step's info snapshot copies them."""
+    return np.frombuffer(records.tobytes(), dtype=records.dtype)
 
 
 class WorldArrays(NamedTuple):
@@ -286,12 +286,9 @@ class WorldBatch:
             energy_hover=float(cfg.energy_hover),
             max_footprint=float(self.max_footprint),
         )
-
-    def __getattr__(self, name: str) -> Any:
-        # The arrays by name (world.status, world.views, ...): one definition, in WorldArrays.
-        if name in WorldArrays._fields:
-            return getattr(self.__dict__["arrays"], name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        # Each array also by name (world.status, world.views, ...): the same objects, listed
+        # once, in WorldArrays; plain attributes, as a step reads several of them.
+        vars(self).update(self.arrays._asdict())
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Copies of every state array (:data:`STATE_ARRAYS`), enough to continue exactly."""
