@@ -14,7 +14,8 @@ import pirl.env
 import pirl.physics
 import pirl.world
 from pirl.env import VCPPEnv, VCPPVectorEnv, make_vec_env
-from pirl.world.state import STATE_ARRAYS, WorldArrays, WorldBatch
+from pirl.world.footprint import Lens
+from pirl.world.state import STATE_ARRAYS, Params, WorldArrays, WorldBatch
 
 MAX_PARAMETERS = 8
 SMALL = {"size": (8, 8, 3), "max_steps": 40, "scale_by_alpha": False, "battery_capacity": 30.0}
@@ -50,6 +51,9 @@ def test_world_arrays_are_named_and_the_state_is_a_subset():
     assert set(STATE_ARRAYS) <= set(WorldArrays._fields)
     assert world.status.dtype.names[:6] == ("x", "y", "z", "tilt", "pan", "zoom10")
     assert world.status is world.arrays.status  # one set of arrays, reached by name
+    # The kernels pass Params where a footprint function wants a Lens.
+    assert Params._fields[: len(Lens._fields)] == Lens._fields
+    assert tuple(world.params[: len(Lens._fields)]) == tuple(world.lens)
 
 
 def _play(env, steps: int, seed: int) -> list:

@@ -98,7 +98,7 @@ class WorldArrays(NamedTuple):
     blk_total: np.ndarray
     """(N, G, G) coverable cells of each coarse block."""
     obstacles: np.ndarray
-    """(N, max_obstacles, 4) spheres (cx, cy, cz, radius); ``status.n_obstacles`` are used."""
+    """(N, max_obstacles, 4) spheres (cx, cy, cz, radius); ``status["n_obstacles"]`` are used."""
     terms: np.ndarray
     """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
