@@ -108,3 +108,18 @@ def test_every_preset_loads(preset):
     cfg = RunConfig.from_yaml(preset)
     assert cfg.env.size == (15, 15, 3)  # every profile trains on the paper's world
     assert cfg.pare.advisor in ("local", "openai", "oracle")
+
+
+def test_a_checkpoint_from_before_the_named_world_state_is_refused_in_one_line(tmp_path):
+    import pickle
+
+    from pirl.agents import checkpoint
+
+    step = tmp_path / "step_64"
+    step.mkdir()
+    (step / "model.zip").write_bytes(b"")
+    with open(step / "state.pkl", "wb") as fh:
+        pickle.dump({"num_timesteps": 64, "world": {}, "weights": None, "rngs": []}, fh)
+    (tmp_path / "LATEST").write_text("step_64")
+    with pytest.raises(ConfigError, match="older pirl"):
+        checkpoint.load_latest(tmp_path)

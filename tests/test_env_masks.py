@@ -16,9 +16,7 @@ SMALL = {"size": (6, 6, 3), "max_steps": 40, "scale_by_alpha": False, "battery_c
 
 def expected_mask(world, e: int) -> np.ndarray:
     """The rule written out in Python: what each action would change."""
-    x, y, z, tilt, pan, zoom = (
-        int(world.ints[e, c]) for c in (D.PX, D.PY, D.PZ, D.TILT, D.PAN, D.ZOOM)
-    )
+    (x, y, z), (tilt, pan, zoom) = world.position(e), world.camera_setting(e)
     sx, sy, sz = world.blocked.shape[1:]
     mask = np.zeros(D.N_ACTIONS, dtype=bool)
     for a, (dx, dy, dz) in enumerate(D.MOVE_DELTAS):
@@ -42,13 +40,12 @@ def test_single_env_mask_matches_the_rule_and_marks_what_changes_nothing():
         assert np.array_equal(mask, expected_mask(env.world, 0))
         assert info["action_mask"] == tuple(mask.tolist())
         a = int(rng.integers(0, D.N_ACTIONS))
-        before = env.world.ints[0].copy()
+        before = env.world.camera_setting(0)
         obs, _, terminated, truncated, info = env.step(a)
         if not mask[a]:
             invalid_seen += 1
             # an invalid action moves nothing and steers nothing (wind may still push)
-            cam = [D.TILT, D.PAN, D.ZOOM]
-            assert np.array_equal(env.world.ints[0, cam], before[cam])
+            assert env.world.camera_setting(0) == before
             if a < D.N_MOVES:
                 assert info["collision"]
         if terminated or truncated:

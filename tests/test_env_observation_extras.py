@@ -47,7 +47,7 @@ def test_target_points_at_the_nearest_uncovered_cell():
     obs = venv.reset()
     w = venv.world
     for e in range(3):
-        x, y = int(w.ints[e, D.PX]), int(w.ints[e, D.PY])
+        x, y, _ = w.position(e)
         todo = np.argwhere(w.coverable[e] & (w.views[e] == 0))
         d = np.sqrt(((todo - [x, y]) ** 2).sum(axis=1))
         k = int(np.argmin(d))

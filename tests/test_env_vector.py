@@ -111,4 +111,4 @@ def test_an_action_out_of_range_is_refused_before_any_world_moves(parallel):
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"\[0, 12\)"):
         env.step(np.array([0, 1, 12, 3]))
-    assert (env.world.ints[:, 6] == 0).all()  # STEPS: nothing was stepped
+    assert (env.world.status["steps"] == 0).all()  # nothing was stepped

@@ -53,8 +53,8 @@ def test_prompt_state_of_a_view_says_what_the_world_batch_says():
         world = venv.core.world
         for e, view in enumerate(venv.world_views(range(3))):
             state = view_prompt_state(view)
-            row = world.ints[e]
-            assert state.coverage == row[D.COVERED] / row[D.COVERABLE]
+            row = world.status[e]
+            assert state.coverage == row["covered"] / row["coverable"]
             assert state.battery == world.battery(e)
             assert state.position == world.position(e)
             assert (state.tilt, state.pan, state.zoom) == world.camera(e)

@@ -80,7 +80,7 @@ def _rollout(pare: PAREVecEnv, steps: int, seed: int = 0, pause: float = 0.0):
     for _ in range(steps):
         time.sleep(pause)  # the policy's own time per step
         world = pare.venv.world
-        p_t = world.ints[:, 0:3].copy()
+        p_t = world.positions()
         obs, rewards, dones, infos = pare.step(rng.integers(0, 12, pare.num_envs))
         out.append((p_t, rewards, dones, infos))
     return out
@@ -100,7 +100,7 @@ def test_sync_reward_is_base_reward_plus_weighted_alignment():
         from pirl.world.planning import WorldView
 
         recs = [oracle_recommendation(WorldView.of(plain.world, e, copy=True)) for e in range(n)]
-        p_t = plain.world.ints[:, 0:3].copy()
+        p_t = plain.world.positions()
         actions = rng.integers(0, 12, n)
         _, base, dones, base_infos = plain.step(actions)
         _, shaped, pdones, infos = pare.step(actions)

@@ -81,7 +81,7 @@ def test_mission_reset_is_the_grid_envs_scenario_and_observation(footprint: str)
         np.testing.assert_array_equal(mission.scenario.obstacles, env.world.obstacle_list(0))
         assert mission.start == env.world.position(0)
         np.testing.assert_array_equal(obs, grid_obs)
-        assert info["covered"] == env.world.ints[0, 7]
+        assert info["covered"] == env.world.status[0]["covered"]
 
 
 @pytest.mark.parametrize("footprint", ["paper", "frustum"])
@@ -185,7 +185,7 @@ def test_begin_step_applies_camera_rules_geofence_and_targets() -> None:
     plan = mission.begin_step(1)  # x- out of the grid
     assert plan.kind == REFUSED and plan.target == (0, 2, 0)
     mission.end_step(fly_kinematic(mission))
-    assert mission.world.ints[0, 12] == 1 and mission.geofence == 1  # one collision
+    assert mission.world.status[0]["collisions"] == 1 and mission.geofence == 1  # one collision
     plan = mission.begin_step(6)  # tilt+5 at its limit of 90: unchanged, like the grid
     assert plan.kind == CAMERA and plan.camera == (90, 0, 10)
     mission.end_step(fly_kinematic(mission))

@@ -67,11 +67,11 @@ def test_zoom_has_no_float_drift(open_env):
     for _ in range(20):
         _, _, _, _, info = env.step(10)
     assert info["camera"][2] == 2.0
-    assert env.unwrapped.world.ints[0, D.ZOOM] == 20
+    assert env.unwrapped.world.status[0]["zoom10"] == 20
     for _ in range(15):
         _, _, _, _, info = env.step(11)
     assert info["camera"][2] == 0.5
-    assert env.unwrapped.world.ints[0, D.ZOOM] == 5
+    assert env.unwrapped.world.status[0]["zoom10"] == 5
 
 
 @pytest.mark.parametrize(
@@ -95,7 +95,7 @@ def test_move_out_of_the_grid_is_a_collision(open_env, start, action):
     assert info["idle"] is False
     assert info["reward_terms"]["curiosity"] == 0.0
     assert not terminated and not truncated
-    assert env.unwrapped.world.ints[0, D.COLLISIONS] == 1
+    assert env.unwrapped.world.status[0]["collisions"] == 1
     assert episode_metrics(env.unwrapped.world, 0)["collisions"] == 1
 
 
@@ -148,7 +148,7 @@ def test_camera_action_at_its_limit_changes_nothing_and_is_idle(open_env, settin
     assert info["collision"] is False
     assert info["redundant"] is True
     assert info["reward_terms"]["battery"] == pytest.approx(0.3)
-    assert env.unwrapped.world.ints[0, D.COLLISIONS] == 0
+    assert env.unwrapped.world.status[0]["collisions"] == 0
 
 
 def test_idle_only_when_nothing_changed(open_env):
@@ -229,7 +229,7 @@ def test_no_wind_never_pushes(open_env):
         else:
             assert info["position"] == pos
         pos = info["position"]
-    assert world.ints[0, D.WIND_PUSHES] == 0
+    assert world.status[0]["wind_pushes"] == 0
 
 
 def _neighbours_blocked(world, pos):
@@ -267,8 +267,8 @@ def test_full_wind_pushes_every_step_unless_blocked_and_never_collides(open_env,
             assert _neighbours_blocked(world, pos) > 0
         pos = new
     assert len(directions) == 4
-    assert world.ints[0, D.COLLISIONS] == 0
-    assert episode_metrics(world, 0)["wind_pushes"] == world.ints[0, D.WIND_PUSHES] > 200
+    assert world.status[0]["collisions"] == 0
+    assert episode_metrics(world, 0)["wind_pushes"] == world.status[0]["wind_pushes"] > 200
 
 
 def test_wind_rate_matches_wind_prob(open_env):
@@ -292,7 +292,7 @@ def test_wind_moves_after_a_blocked_move_are_not_collisions(open_env):
     for _ in range(50):
         _, _, _, _, info = env.step(4)  # climb until the ceiling, then collide every step
         collisions += info["collision"]
-    assert collisions == env.unwrapped.world.ints[0, D.COLLISIONS] >= 48
+    assert collisions == env.unwrapped.world.status[0]["collisions"] >= 48
 
 
 # -- battery, step limit ---------------------------------------------------------------------

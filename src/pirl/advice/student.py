@@ -45,7 +45,6 @@ from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.config import grid
-from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
 FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
@@ -70,7 +69,7 @@ MIN_HELDOUT = 20
 def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) -> np.ndarray:
     """Features of ``worlds`` (rows of ``obs`` are their observations now), float32."""
     rows = np.asarray(worlds, dtype=np.int64)
-    return pose_features(obs, world.cfg.size, world.ints[rows, D.PX : D.PZ + 1])
+    return pose_features(obs, world.cfg.size, world.positions(rows))
 
 
 def pose_features(obs: np.ndarray, size: Sequence[int], positions: np.ndarray) -> np.ndarray:

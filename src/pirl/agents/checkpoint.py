@@ -22,28 +22,22 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
 
+from pirl.config.errors import ConfigError
 from pirl.env.vec_env import VCPPVecEnv
-
-_WORLD_ARRAYS = (
-    "ints", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
-    "blk_total", "obstacles", "terms", "flags",
-)  # fmt: skip
 
 
 def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:
     """An in-memory copy of the whole training state (taken at a rollout boundary)."""
-    world, core = venv.world, venv.core
     state: dict[str, Any] = {
         "num_timesteps": int(model.num_timesteps),
         "n_updates": int(model._n_updates),  # SB3 logs train/n_updates from it
         "policy": {k: v.detach().clone() for k, v in model.policy.state_dict().items()},
         "optimizer": copy.deepcopy(model.policy.optimizer.state_dict()),
+        # SB3 offers no public accessor for the rollout's next observation and episode starts.
         "last_obs": np.copy(model._last_obs),
         "last_episode_starts": np.copy(model._last_episode_starts),
         "ep_info_buffer": list(model.ep_info_buffer or []),
-        "world": {name: getattr(world, name).copy() for name in _WORLD_ARRAYS},
-        "weights": core.weights.copy(),
-        "rngs": copy.deepcopy(venv._rngs),
+        "env": venv.state_dict(),
         "monitor": {
             "episode_returns": monitor.episode_returns.copy(),
             "episode_lengths": monitor.episode_lengths.copy(),
@@ -69,12 +63,7 @@ def restore(
     model._last_obs = state["last_obs"]
     model._last_episode_starts = state["last_episode_starts"]
     model.ep_info_buffer = None  # rebuilt by learn(); refilled below
-    world, core = venv.world, venv.core
-    for name, value in state["world"].items():
-        getattr(world, name)[...] = value
-    core.weights[...] = state["weights"]
-    core.refresh_masks()  # masks are derived from the world state, not saved
-    venv._rngs = copy.deepcopy(state["rngs"])
+    venv.load_state_dict(state["env"])
     monitor.episode_returns = state["monitor"]["episode_returns"].copy()
     monitor.episode_lengths = state["monitor"]["episode_lengths"].copy()
     monitor.episode_count = state["monitor"]["episode_count"]
@@ -152,6 +141,11 @@ def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
                 log(f"resume: checkpoint {path} is damaged ({type(exc).__name__}); skipping it")
             continue
         if isinstance(state, dict) and "num_timesteps" in state:
+            if "env" not in state:
+                raise ConfigError(
+                    f"resume: checkpoint {path} was written by an older pirl (world arrays "
+                    "before the named world state); resume it with that version or start anew"
+                )
             return path, state
     return None
 

@@ -8,56 +8,74 @@ both follow the same rules by construction.
 from __future__ import annotations
 
 from itertools import repeat
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
 
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.info import InfoSnapshot, LazyInfo
-from pirl.env.observation import _observation, build_observations, obs_extras, obs_size_for
+from pirl.env.observation import build_observations, obs_layout, obs_size_for, observation
 from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
-from pirl.world.dynamics import F_TERMINATED, F_TRUNCATED, N_ACTIONS, PI_STEP_LIMIT, step_one
+from pirl.world.dynamics import N_ACTIONS, step_one
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch
+
+
+class EnvArrays(NamedTuple):
+    """What the environment adds to each world (first axis = world), as the kernel takes it."""
+
+    weights: np.ndarray
+    """(N, 8) reward weights, in the order of ``REWARD_TERMS``."""
+    rewards: np.ndarray
+    """(N,) reward of the last step."""
+    obs: np.ndarray
+    """(N, obs_size) float32 observations."""
+    masks: np.ndarray
+    """(N, 12) actions that can change something now (see ``dynamics.action_mask``)."""
+
+
+@numba.njit(**D.BATCH_KERNEL)
+def step_world(w, p, layout, env, e, a):
+    """Step world e with action ``a``, weigh its reward, write its observation and mask;
+    return 1 when its episode ended.
+
+    Its own function, not inlined into the loop below: numba's parallel loop loses writes
+    made through a tuple's fields in its body, but not those made in a function it calls.
+    """
+    step_one(w, p, e, a)
+    terms, weights = w.terms, env.weights
+    r = 0.0
+    for k in range(terms.shape[1]):
+        r += terms[e, k] * weights[e, k]
+    env.rewards[e] = r
+    observation(w, p, layout, e, env.obs)
+    D.action_mask(w, p, e, env.masks)
+    return w.flags[e]["terminated"] | w.flags[e]["truncated"]
 
 
 def _make_step_kernel(parallel: bool):
     """A kernel that steps every world, weighs its reward terms and builds its observation.
 
-    One fused loop (one thread launch, data still in cache) over the rules defined once in
-    :func:`pirl.world.dynamics.step_one` and :func:`pirl.env.observation._observation`, which
-    numba inlines into it. Returns how many worlds ended, or -1 (nothing stepped) when an
-    action lies outside [0, N_ACTIONS).
+    One fused loop (one thread launch, data still in cache) over :func:`step_world`, the rules
+    defined once in :func:`pirl.world.dynamics.step_one` and
+    :func:`pirl.env.observation.observation`. Returns how many worlds ended, or -1 (nothing
+    stepped) when an action lies outside [0, N_ACTIONS).
     """
     loop = numba.prange if parallel else range
 
-    @numba.njit(cache=True, parallel=parallel)
-    def kernel(
-        actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo,
-        blk_total, bx, by, obstacles, pf, pi, buf, terms, flags, weights, rewards, capacity,
-        window, obs, masks, extras,
-    ):  # fmt: skip
+    # numba's parallel loop needs its reference counting; step_world still goes without.
+    options = {"cache": True, "parallel": True} if parallel else D.BATCH_KERNEL
+
+    @numba.njit(**options)
+    def kernel(w, p, layout, env, actions):
         for e in range(actions.shape[0]):
             if actions[e] < 0 or actions[e] >= N_ACTIONS:
                 return -1
         ended = 0
         for e in loop(actions.shape[0]):
-            step_one(
-                e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits,
-                blk_todo, bx, by, obstacles, pf, pi, buf, terms, flags,
-            )  # fmt: skip
-            r = 0.0
-            for k in range(terms.shape[1]):
-                r += terms[e, k] * weights[e, k]
-            rewards[e] = r
-            _observation(
-                e, ints, energy, capacity, pi[PI_STEP_LIMIT], blocked, coverable, views,
-                blk_todo, blk_total, window, obs, visits, extras,
-            )  # fmt: skip
-            D.action_mask(e, ints, blocked, pi, masks)
-            ended += flags[e, F_TERMINATED] | flags[e, F_TRUNCATED]
+            ended += step_world(w, p, layout, env, e, actions[e])
         return ended
 
     return kernel
@@ -74,13 +92,15 @@ class EnvCore:
         self.cfg = cfg
         self.num = num
         self.world = WorldBatch(cfg, num, parallel)
-        self.weights = np.zeros((num, len(REWARD_TERMS)), dtype=np.float64)
-        self.rewards = np.zeros(num, dtype=np.float64)
-        self.obs = np.zeros((num, obs_size_for(cfg)), dtype=np.float32)
-        self.extras = obs_extras(cfg)
-        # Which actions can change something in each world's current state (written with the
-        # observation after every reset and step; see dynamics.action_mask).
-        self.masks = np.ones((num, N_ACTIONS), dtype=np.bool_)
+        self.arrays = EnvArrays(
+            weights=np.zeros((num, len(REWARD_TERMS)), dtype=np.float64),
+            rewards=np.zeros(num, dtype=np.float64),
+            obs=np.zeros((num, obs_size_for(cfg)), dtype=np.float32),
+            # Written with the observation after every reset and step.
+            masks=np.ones((num, N_ACTIONS), dtype=np.bool_),
+        )
+        self.weights, self.rewards, self.obs, self.masks = self.arrays
+        self.layout = obs_layout(cfg)
         self._all = np.arange(num, dtype=np.int64)
         self.ended = -1  # worlds ended on the last step; -1 = unknown (read the flags)
 
@@ -105,38 +125,42 @@ class EnvCore:
         actions = np.asarray(actions, dtype=np.int64).reshape(self.num)
         w = self.world
         kernel = _step_parallel if w.parallel else _step_serial
-        ended = kernel(
-            actions, w.ints, w.energy, w.rng, w.blocked, w.coverable, w.views, w.redmask,
-            w.visits, w.blk_todo, w.blk_total, w.bx, w.by, w.obstacles, w.pf, w.pi, w.buf,
-            w.terms, w.flags, self.weights, self.rewards, w.capacity, self.cfg.obs_window,
-            self.obs, self.masks, self.extras,
-        )  # fmt: skip
+        ended = kernel(w.arrays, w.params, self.layout, self.arrays, actions)
         if ended < 0:
             raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
         self.ended = ended
         return ended
 
-    def refresh_masks(self) -> None:
-        """Recompute every world's valid actions (after its state was loaded from elsewhere,
-        e.g. a checkpoint)."""
+    def state_dict(self) -> dict[str, Any]:
+        """Copies of what continues an episode exactly: the worlds, the weights, the
+        observations (the masks are derived from the worlds)."""
+        return {
+            "world": self.world.state_dict(),
+            "weights": self.weights.copy(),
+            "obs": self.obs.copy(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Put a :meth:`state_dict` back into this core's own arrays."""
+        self.world.load_state_dict(state["world"])
+        self.weights[...] = state["weights"]
+        self.obs[...] = state["obs"]
+        self.ended = -1
         w = self.world
-        D.action_masks(self._all, w.ints, w.blocked, w.pi, self.masks)
+        D.action_masks(w.arrays, w.params, self._all, self.masks)
 
     def _observe(self, worlds: np.ndarray) -> None:
         w = self.world
-        build_observations(
-            worlds, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
-            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs, w.visits, self.extras,
-        )  # fmt: skip
-        D.action_masks(worlds, w.ints, w.blocked, w.pi, self.masks)
+        build_observations(w.arrays, w.params, self.layout, worlds, self.obs)
+        D.action_masks(w.arrays, w.params, worlds, self.masks)
 
     @property
     def terminated(self) -> np.ndarray:
-        return self.world.flags[:, D.F_TERMINATED].astype(bool)
+        return self.world.flags["terminated"].astype(bool)
 
     @property
     def truncated(self) -> np.ndarray:
-        return self.world.flags[:, D.F_TRUNCATED].astype(bool)
+        return self.world.flags["truncated"].astype(bool)
 
     def infos_snapshot(self) -> InfoSnapshot:
         """Copies of what every world's info is made of, as of the last step or reset (with
@@ -144,11 +168,9 @@ class EnvCore:
         w = self.world
         metrics = {}
         if self.ended:  # most steps end no episode: skip the search
-            done = np.flatnonzero(w.flags[:, D.F_TERMINATED] | w.flags[:, D.F_TRUNCATED])
+            done = np.flatnonzero(w.flags["terminated"] | w.flags["truncated"])
             metrics = {int(e): episode_metrics(w, int(e)) for e in done}
-        return InfoSnapshot(
-            w.ints, w.terms, self.weights, w.flags, w.energy, w.capacity, metrics, self.masks
-        )
+        return InfoSnapshot(w, self.weights, metrics, self.masks)
 
     def infos(self, worlds: list[int] | None = None, lazy: bool = False) -> list[dict[str, Any]]:
         """The ``info`` dict of each world (all by default), as of the last step or reset.

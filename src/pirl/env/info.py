@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from pirl.config.world import REWARD_TERMS
-from pirl.world import dynamics as D
+from pirl.world.state import WorldBatch, copy_records
 
 INFO_KEYS = frozenset(
     {
@@ -39,26 +39,24 @@ INFO_KEYS = frozenset(
 
 
 class InfoSnapshot:
-    """Copies of the arrays an info is made of, at one step."""
+    """Copies of the arrays an info is made of, at one step: the worlds' ``status`` and
+    ``flags`` records, ``terms``, ``energy``, and the env's ``weights`` and ``masks``."""
 
     __slots__ = (
-        "ints", "terms", "weights", "flags", "energy", "capacity", "metrics", "masks", "extras",
+        "status", "terms", "weights", "flags", "energy", "capacity", "metrics", "masks", "extras",
     )  # fmt: skip
 
     def __init__(
         self,
-        ints: np.ndarray,
-        terms: np.ndarray,
+        world: WorldBatch,
         weights: np.ndarray,
-        flags: np.ndarray,
-        energy: np.ndarray,
-        capacity: float,
         metrics: dict[int, dict[str, float]],
         masks: np.ndarray | None = None,
     ) -> None:
-        self.ints, self.terms, self.weights = ints.copy(), terms.copy(), weights.copy()
-        self.flags, self.energy = flags.copy(), energy.copy()
-        self.capacity = capacity
+        w = world.arrays
+        self.status, self.flags = copy_records(w.status), copy_records(w.flags)
+        self.terms, self.weights, self.energy = w.terms.copy(), weights.copy(), w.energy.copy()
+        self.capacity = world.capacity
         self.metrics = metrics
         # None where the caller has no valid-action rule (then info has no "action_mask").
         self.masks = None if masks is None else masks.copy()
@@ -67,22 +65,22 @@ class InfoSnapshot:
 
     def info(self, e: int) -> dict[str, Any]:
         """The full info dict of world ``e``."""
-        r = self.ints[e].tolist()
-        f = self.flags[e].tolist()
+        r = dict(zip(self.status.dtype.names, self.status[e].tolist(), strict=True))
+        f = dict(zip(self.flags.dtype.names, self.flags[e].tolist(), strict=True))
         info = {
             "reward_terms": dict(zip(REWARD_TERMS, self.terms[e].tolist(), strict=True)),
             "reward_weights": dict(zip(REWARD_TERMS, self.weights[e].tolist(), strict=True)),
-            "new_cells": f[D.F_NEW],
-            "covered": r[D.COVERED],
-            "coverable": r[D.COVERABLE],
+            "new_cells": f["new_cells"],
+            "covered": r["covered"],
+            "coverable": r["coverable"],
             "battery": max(0.0, float(self.energy[e]) / self.capacity),
-            "collision": bool(f[D.F_COLLISION]),
-            "redundant": bool(f[D.F_REDUNDANT]),
-            "idle": bool(f[D.F_IDLE]),
-            "wind": bool(f[D.F_WIND]),
-            "position": (r[D.PX], r[D.PY], r[D.PZ]),
-            "camera": (r[D.TILT], r[D.PAN], r[D.ZOOM] / 10.0),
-            "steps": r[D.STEPS],
+            "collision": bool(f["collision"]),
+            "redundant": bool(f["redundant"]),
+            "idle": bool(f["idle"]),
+            "wind": bool(f["wind"]),
+            "position": (r["x"], r["y"], r["z"]),
+            "camera": (r["tilt"], r["pan"], r["zoom10"] / 10.0),
+            "steps": r["steps"],
         }
         if self.masks is not None:
             # A tuple: info dicts are compared and written as JSON (action_masks() gives arrays).
@@ -97,8 +95,8 @@ class InfoSnapshot:
         """Every world's info as Gymnasium's vector envs give it: a dict of arrays (first axis
         = world), each key ``k`` with a boolean mask ``_k`` of the worlds that have it (those
         in the boolean mask ``worlds``, default all)."""
-        n = self.ints.shape[0]
-        r, f = self.ints, self.flags
+        n = self.status.shape[0]
+        r, f = self.status, self.flags
         out: dict[str, Any] = {}
         every = np.ones(n, dtype=np.bool_) if worlds is None else np.asarray(worlds, np.bool_)
 
@@ -111,20 +109,17 @@ class InfoSnapshot:
             for k, name in enumerate(REWARD_TERMS):
                 put(inner, name, table[:, k].copy())
             put(out, key, inner)
-        put(out, "new_cells", f[:, D.F_NEW].copy())
-        put(out, "covered", r[:, D.COVERED].copy())
-        put(out, "coverable", r[:, D.COVERABLE].copy())
+        put(out, "new_cells", f["new_cells"].copy())
+        put(out, "covered", r["covered"].copy())
+        put(out, "coverable", r["coverable"].copy())
         put(out, "battery", np.maximum(0.0, self.energy / self.capacity))
-        for key, col in (
-            ("collision", D.F_COLLISION), ("redundant", D.F_REDUNDANT), ("idle", D.F_IDLE),
-            ("wind", D.F_WIND),
-        ):  # fmt: skip
-            put(out, key, f[:, col].astype(np.bool_))
-        put(out, "position", r[:, [D.PX, D.PY, D.PZ]].copy())
-        camera = r[:, [D.TILT, D.PAN, D.ZOOM]].astype(np.float64)
+        for key in ("collision", "redundant", "idle", "wind"):
+            put(out, key, f[key].astype(np.bool_))
+        put(out, "position", np.stack([r["x"], r["y"], r["z"]], axis=1))
+        camera = np.stack([r["tilt"], r["pan"], r["zoom10"]], axis=1).astype(np.float64)
         camera[:, 2] /= 10.0
         put(out, "camera", camera)
-        put(out, "steps", r[:, D.STEPS].copy())
+        put(out, "steps", r["steps"].copy())
         if self.masks is not None:
             put(out, "action_mask", self.masks.copy())
         ended = {e: m for e, m in self.metrics.items() if every[e]}

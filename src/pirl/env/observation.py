@@ -26,17 +26,28 @@ The last two blocks are off by default (the paper's observation: 317 values).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from pirl.config.world import VCPPConfig
-from pirl.world import dynamics as D
+from pirl.world.dynamics import BATCH_KERNEL
 
 N_SCALARS = 11
 N_TARGET = 3
 TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
-# Bits of the ``extras`` argument of the kernels: which optional blocks the observation has.
+# Bits of ObsLayout.extras: which optional blocks the observation has.
 EXTRA_VISITS, EXTRA_TARGET = 1, 2
+
+
+class ObsLayout(NamedTuple):
+    """What the observation holds, as the kernels take it."""
+
+    window: int
+    """Side W of the local windows (odd)."""
+    extras: int
+    """Bits ``EXTRA_VISITS | EXTRA_TARGET`` of the optional blocks present."""
 
 
 def obs_size(window: int, global_side: int, visits: bool = False, target: bool = False) -> int:
@@ -50,22 +61,30 @@ def obs_size_for(cfg: VCPPConfig) -> int:
     return obs_size(cfg.obs_window, cfg.obs_global, cfg.obs_visits, cfg.obs_target)
 
 
-def obs_extras(cfg: VCPPConfig) -> int:
-    """The ``extras`` bits of an environment config, for the observation kernels."""
-    return (EXTRA_VISITS if cfg.obs_visits else 0) | (EXTRA_TARGET if cfg.obs_target else 0)
+def obs_layout(cfg: VCPPConfig) -> ObsLayout:
+    """The :class:`ObsLayout` of an environment config, for the observation kernels."""
+    extras = (EXTRA_VISITS if cfg.obs_visits else 0) | (EXTRA_TARGET if cfg.obs_target else 0)
+    return ObsLayout(int(cfg.obs_window), extras)
 
 
 @numba.njit(cache=True, inline="always")
-def _observation(
-    e, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
-    window, out, visits, extras,
-):  # fmt: skip
-    sx, sy, sz = blocked.shape[1], blocked.shape[2], blocked.shape[3]
+def observation(w, p, layout, e, out):
+    """Write world e's observation (``w``: WorldArrays, ``p``: Params) into ``out[e]``."""
+    blocked, coverable, views, blk_todo, blk_total = (
+        w.blocked,
+        w.coverable,
+        w.views,
+        w.blk_todo,
+        w.blk_total,
+    )
+    st = w.status[e]
+    sx, sy, sz = p.size_x, p.size_y, p.size_z
     g = blk_todo.shape[1]
+    window, extras = layout.window, layout.extras
     half = window // 2
     ww = window * window
     o = out[e]
-    x, y, z = ints[e, D.PX], ints[e, D.PY], ints[e, D.PZ]
+    x, y, z = st["x"], st["y"], st["z"]
     k = 0
     for i in range(x - half, x + half + 1):
         for j in range(y - half, y + half + 1):
@@ -85,20 +104,20 @@ def _observation(
     o[k] = x / (sx - 1)
     o[k + 1] = y / (sy - 1)
     o[k + 2] = z / (sz - 1)
-    o[k + 3] = ints[e, D.TILT] / 90.0
-    o[k + 4] = (ints[e, D.PAN] + 90) / 180.0
-    o[k + 5] = (ints[e, D.ZOOM] - 5) / 15.0
-    o[k + 6] = min(1.0, max(0.0, energy[e] / capacity))
-    cov = ints[e, D.COVERABLE]
-    o[k + 7] = ints[e, D.COVERED] / cov if cov > 0 else 1.0
-    o[k + 8] = max(0.0, (step_limit - ints[e, D.STEPS]) / step_limit)
+    o[k + 3] = st["tilt"] / 90.0
+    o[k + 4] = (st["pan"] + 90) / 180.0
+    o[k + 5] = (st["zoom10"] - 5) / 15.0
+    o[k + 6] = min(1.0, max(0.0, w.energy[e] / p.capacity))
+    cov = st["coverable"]
+    o[k + 7] = st["covered"] / cov if cov > 0 else 1.0
+    o[k + 8] = max(0.0, (p.step_limit - st["steps"]) / p.step_limit)
     o[k + 9] = 1.0 if (z + 1 >= sz or blocked[e, x, y, z + 1]) else 0.0
     o[k + 10] = 1.0 if (z - 1 < 0 or blocked[e, x, y, z - 1]) else 0.0
     k += N_SCALARS
     if extras & EXTRA_VISITS:
         for i in range(x - half, x + half + 1):
             for j in range(y - half, y + half + 1):
-                v = visits[e, i, j, z] if (0 <= i < sx and 0 <= j < sy) else 0
+                v = w.visits[e, i, j, z] if (0 <= i < sx and 0 <= j < sy) else 0
                 o[k] = min(v, 3) / 3.0
                 k += 1
     if extras & EXTRA_TARGET:
@@ -119,17 +138,18 @@ def _observation(
             o[k + 2] = min(d, TARGET_RANGE) / TARGET_RANGE
 
 
-@numba.njit(cache=True)
-def build_observations(
-    worlds, ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo, blk_total,
-    window, out, visits, extras,
-):  # fmt: skip
+@numba.njit(**BATCH_KERNEL)
+def build_observations(w, p, layout, worlds, out):
     """Write the observation of each world index in ``worlds`` into the matching row of out."""
     for k in range(worlds.shape[0]):
-        _observation(
-            worlds[k], ints, energy, capacity, step_limit, blocked, coverable, views, blk_todo,
-            blk_total, window, out, visits, extras,
-        )  # fmt: skip
+        observation(w, p, layout, worlds[k], out)
 
 
-__all__ = ["N_SCALARS", "build_observations", "obs_extras", "obs_size", "obs_size_for"]
+__all__ = [
+    "N_SCALARS",
+    "ObsLayout",
+    "build_observations",
+    "obs_layout",
+    "obs_size",
+    "obs_size_for",
+]

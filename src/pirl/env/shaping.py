@@ -16,7 +16,6 @@ import numpy as np
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.info import InfoSnapshot
-from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 
 
@@ -32,11 +31,11 @@ class ShapingHooks:
     def poses(self) -> np.ndarray:
         """(num_envs, 6) int64: each world's position (x, y, z) and camera (tilt, pan, zoom
         tenths) now; after an auto-reset, the new episode's first."""
-        return self.core.world.ints[:, D.PX : D.ZOOM + 1].copy()
+        return _poses(self.core.world.status)
 
     def step_poses(self) -> np.ndarray:
         """As :meth:`poses`, at the end of the last step (before any auto-reset)."""
-        return self._last_step().ints[:, D.PX : D.ZOOM + 1].copy()
+        return _poses(self._last_step().status)
 
     def step_weights(self, term: str) -> np.ndarray:
         """(num_envs,) float64: the weight of reward term ``term`` in each world's last step
@@ -62,6 +61,14 @@ class ShapingHooks:
         if self.step_snapshot is None:
             raise RuntimeError("no step yet: the shaping hooks describe the last step")
         return self.step_snapshot
+
+
+_POSE_FIELDS = ("x", "y", "z", "tilt", "pan", "zoom10")
+
+
+def _poses(status: np.ndarray) -> np.ndarray:
+    """(n, 6) int64 pose columns of the worlds' status records."""
+    return np.stack([status[name] for name in _POSE_FIELDS], axis=-1).astype(np.int64)
 
 
 __all__ = ["ShapingHooks"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -15,7 +16,7 @@ from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.world import dynamics as D
-from pirl.world.state import Scenario
+from pirl.world.state import Scenario, WorldBatch
 
 
 def resolve_config(config: VCPPConfig | Mapping[str, Any] | None, settings: Mapping) -> VCPPConfig:
@@ -113,9 +114,20 @@ class VCPPEnv(gym.Env):
         self.path: list[tuple[int, int, int]] = []
 
     @property
-    def world(self):
+    def world(self) -> WorldBatch:
         """The underlying one-world :class:`~pirl.world.state.WorldBatch`."""
         return self.core.world
+
+    def state_dict(self) -> dict[str, Any]:
+        """Copies of what this env owns (the core and its random generator), enough to continue
+        exactly after :meth:`load_state_dict`."""
+        return {"core": self.core.state_dict(), "np_random": copy.deepcopy(self.np_random)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Put a :meth:`state_dict` back (the render path starts afresh)."""
+        self.core.load_state_dict(state["core"])
+        self.np_random = copy.deepcopy(state["np_random"])
+        self.path = [self.world.position(0)]
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

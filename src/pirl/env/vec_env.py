@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -17,6 +18,7 @@ from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
+from pirl.world.state import WorldBatch
 
 
 class VCPPVecEnv(ShapingHooks, VecEnv):
@@ -53,9 +55,19 @@ class VCPPVecEnv(ShapingHooks, VecEnv):
         self.step_snapshot = None
 
     @property
-    def world(self):
+    def world(self) -> WorldBatch:
         """The underlying :class:`~pirl.world.state.WorldBatch`."""
         return self.core.world
+
+    def state_dict(self) -> dict[str, Any]:
+        """Copies of what this env owns (the core's worlds, weights and observations, each
+        world's random generator), enough to continue exactly after :meth:`load_state_dict`."""
+        return {"core": self.core.state_dict(), "rngs": copy.deepcopy(self._rngs)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Put a :meth:`state_dict` back."""
+        self.core.load_state_dict(state["core"])
+        self._rngs = copy.deepcopy(state["rngs"])
 
     def reset(self) -> np.ndarray:
         for e in range(self.num_envs):

@@ -7,6 +7,7 @@ reward and writes its observation into a preallocated buffer.
 
 from __future__ import annotations
 
+import copy as copy_
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -25,6 +26,7 @@ from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
 from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
+from pirl.world.state import WorldBatch
 
 
 class VCPPVectorEnv(ShapingHooks, VectorEnv):
@@ -87,9 +89,26 @@ class VCPPVectorEnv(ShapingHooks, VectorEnv):
         self.step_snapshot: InfoSnapshot | None = None
 
     @property
-    def world(self):
+    def world(self) -> WorldBatch:
         """The underlying :class:`~pirl.world.state.WorldBatch`."""
         return self.core.world
+
+    def state_dict(self) -> dict[str, Any]:
+        """Copies of what this env owns (the core, each world's random generator, which worlds
+        the next step resets), enough to continue exactly after :meth:`load_state_dict`."""
+        return {
+            "core": self.core.state_dict(),
+            "rngs": copy_.deepcopy(self._rngs),
+            "autoreset": self._autoreset.copy(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Put a :meth:`state_dict` back (render paths start afresh)."""
+        self.core.load_state_dict(state["core"])
+        self._rngs = copy_.deepcopy(state["rngs"])
+        self._autoreset[...] = state["autoreset"]
+        self._n_autoreset = int(self._autoreset.sum())
+        self._paths = [[self.world.position(e)] for e in range(self.num_envs)]
 
     def reset(
         self,
@@ -137,8 +156,8 @@ class VCPPVectorEnv(ShapingHooks, VectorEnv):
                 self._paths[e] = []
             ended = -1  # the count included them: read the flags
         flags = core.world.flags
-        terminated = flags[:, D.F_TERMINATED] != 0
-        truncated = flags[:, D.F_TRUNCATED] != 0
+        terminated = flags["terminated"] != 0
+        truncated = flags["truncated"] != 0
         if ended:
             np.logical_or(terminated, truncated, out=self._autoreset)
             self._n_autoreset = int(self._autoreset.sum())

@@ -14,7 +14,6 @@ from pirl.agents.policy import Policy
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
-from pirl.world import dynamics as D
 from pirl.world.metrics import episode_metrics
 
 
@@ -70,7 +69,7 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
         actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live], core.masks[live])
         if core.step(actions):
             flags = core.world.flags
-            ended = live[(flags[live, D.F_TERMINATED] | flags[live, D.F_TRUNCATED]) != 0]
+            ended = live[(flags["terminated"][live] | flags["truncated"][live]) != 0]
             for e in ended:
                 metrics[e] = episode_metrics(core.world, int(e))
             active[ended] = False

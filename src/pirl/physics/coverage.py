@@ -24,29 +24,33 @@ import math
 import numba
 import numpy as np
 
-from pirl.world.footprint import PAPER, _frustum_corners, footprint_cells, frustum_scan
+from pirl.world.footprint import (
+    PAPER,
+    CameraPose,
+    footprint_cells,
+    frustum_corners,
+    frustum_scan,
+)
 
 
 @numba.njit(cache=True)
-def footprint_cells_pose(
-    model, x, y, z, tilt, pan, zoom10, size_x, size_y, fov_deg, max_range, occlusion,
-    obstacles, n_obs, out,
-):  # fmt: skip
-    """Ground cells seen from a continuous pose, written as rows (i, j) of ``out``; the count.
+def footprint_cells_pose(lens, pose, obstacles, out):
+    """Ground cells seen from a continuous :class:`~pirl.world.footprint.CameraPose`, written
+    as rows (i, j) of ``out``; the count.
 
-    ``x, y`` are in cell units (cell (i, j) is centred at (i, j)); ``z`` is the height above
-    the ground in cell units minus one (the grid's level convention, so level k is ``z = k``);
-    ``tilt`` and ``pan`` are degrees (floats); ``obstacles`` in the same units.
+    ``pose.x, pose.y`` are in cell units (cell (i, j) is centred at (i, j)); ``pose.z`` is the
+    height above the ground in cell units minus one (the grid's level convention, so level k
+    is ``z = k``); tilt and pan are degrees (floats); ``obstacles`` in the same units.
     """
-    if model == PAPER:
-        return footprint_cells(
-            PAPER, int(math.floor(x + 0.5)), int(math.floor(y + 0.5)), 0,
-            int(math.floor(tilt + 0.5)), 0, zoom10, size_x, size_y, fov_deg, max_range, False,
-            obstacles, n_obs, out,
+    if lens.model == PAPER:
+        cell = CameraPose(
+            int(math.floor(pose.x + 0.5)), int(math.floor(pose.y + 0.5)), 0,
+            int(math.floor(pose.tilt + 0.5)), 0, pose.zoom10,
         )  # fmt: skip
+        return footprint_cells(lens, cell, obstacles, out)
     poly = np.empty((4, 2))
-    _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, poly)
-    return frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out)
+    frustum_corners(lens, pose, poly)
+    return frustum_scan(lens, pose, poly, obstacles, out)
 
 
 def body_rotation(rpy: np.ndarray) -> np.ndarray:

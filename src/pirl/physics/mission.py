@@ -50,10 +50,10 @@ from pirl.config.errors import ConfigError
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.info import InfoSnapshot
-from pirl.env.observation import build_observations, obs_extras, obs_size_for
+from pirl.env.observation import build_observations, obs_layout, obs_size_for
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
-from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows
+from pirl.world.footprint import FRUSTUM, PAPER, CameraPose, buffer_rows
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch, draw_scenario
 
@@ -138,6 +138,7 @@ class Mission:
             )
         self.model = PAPER if env_cfg.footprint == "paper" else FRUSTUM
         self.obs = np.zeros((1, obs_size_for(env_cfg)), np.float32)
+        self._layout = obs_layout(env_cfg)
         self._buf = np.empty((buffer_rows(self.model, env_cfg.max_range), 2), dtype=np.int64)
         self._weights = np.zeros((1, len(REWARD_TERMS)))
         self._seen = np.zeros(env_cfg.size[:2], dtype=np.bool_)
@@ -184,8 +185,7 @@ class Mission:
 
     def camera(self) -> tuple[int, int, int]:
         """The gimbal's setting now: (tilt degrees, pan degrees, zoom tenths)."""
-        row = self.world.ints[0]
-        return int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
+        return self.world.camera_setting(0)
 
     def target_position(self) -> np.ndarray:
         """The waypoint the drone should fly to now, metres."""
@@ -207,8 +207,7 @@ class Mission:
         # Obstacles in the footprint's units (heights in cell sizes, ground at -1) for occlusion.
         obs = np.asarray(scenario.obstacles, dtype=np.float64).reshape(-1, 4).copy()
         obs[:, 2] = (obs[:, 2] + 1.0) * p.level_height_m / p.cell_size_m - 1.0
-        self._geo_obstacles = obs if len(obs) else np.zeros((1, 4))
-        self._n_obs = len(obs)
+        self._geo_obstacles = obs
         self.start = tuple(int(v) for v in scenario.start)
         self._target_m = self.cell_position(self.start)
         self.sim_seconds = 0.0
@@ -236,9 +235,9 @@ class Mission:
         action = int(action)
         if not 0 <= action < D.N_ACTIONS:
             raise ValueError(f"action must be an integer in [0, {D.N_ACTIONS}); got {action}")
-        row = self.world.ints[0]
-        origin: Cell = (int(row[D.PX]), int(row[D.PY]), int(row[D.PZ]))
-        tilt, pan, zoom = int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
+        w = self.world
+        origin: Cell = w.position(0)
+        tilt, pan, zoom = w.camera_setting(0)
         self._camera_before = (tilt, pan, zoom)
         kind, target = CAMERA, origin
         if action < D.N_MOVES:
@@ -247,8 +246,8 @@ class Mission:
             inside = all(0 <= c < s for c, s in zip(cand, self.cfg.size, strict=True))
             kind, target = (MOVE, cand) if inside else (REFUSED, origin)
         else:
-            D.camera_action(0, action, self.world.ints)  # the grid's camera rule, limits included
-            tilt, pan, zoom = int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])
+            D.camera_action(w.arrays, 0, action)  # the grid's camera rule, limits included
+            tilt, pan, zoom = w.camera_setting(0)
         self.plan = StepPlan(action, kind, origin, target, (tilt, pan, zoom))
         self._target_blocked = bool(self.world.blocked[0][target])
         self._bounced = False
@@ -324,7 +323,6 @@ class Mission:
         ``camera`` is (tilt degrees, pan degrees, zoom tenths). The rows live in a buffer
         that the next call overwrites.
         """
-        cfg = self.cfg
         tilt, pan, zoom10 = self.camera() if camera is None else camera
         x, y, level = self.cell_coords(pose.position)
         if self.model == PAPER:
@@ -333,11 +331,8 @@ class Mission:
             t_eff, p_eff = view_angles(tilt, pan, pose.rpy, self.physics.stabilized_gimbal)
             # Height above the ground in horizontal cell sizes, minus one (the grid's levels).
             z = float(pose.position[2]) / self.physics.cell_size_m - 1.0
-        n = footprint_cells_pose(
-            self.model, float(x), float(y), z, t_eff, p_eff, int(zoom10), cfg.size[0],
-            cfg.size[1], cfg.fov_deg, cfg.max_range, cfg.occlusion, self._geo_obstacles,
-            self._n_obs, self._buf,
-        )  # fmt: skip
+        at = CameraPose(float(x), float(y), z, t_eff, p_eff, int(zoom10))
+        n = footprint_cells_pose(self.world.lens, at, self._geo_obstacles, self._buf)
         return self._buf[:n]
 
     def sample(self, pose: Pose) -> int:
@@ -357,7 +352,6 @@ class Mission:
         if plan is None:
             raise RuntimeError("call begin_step() first")
         w = self.world
-        row = w.ints[0]
         self.sample(pose)  # the arrival view (a repeat of the last sample costs nothing)
         cell = self.nearest_cell(pose.position)
         if w.blocked[0][cell]:
@@ -365,13 +359,14 @@ class Mission:
             # no such position (observations, planners and visits assume free cells), so the
             # step is booked at the free cell it came from, like a bounce.
             cell = plan.origin
-        row[D.PX], row[D.PY], row[D.PZ] = cell
+        st = w.status[0:1]  # a view: numpy writes a record's fields through it
+        st["x"], st["y"], st["z"] = cell
         moved = cell != plan.origin
         cam_changed = plan.camera != self._camera_before
 
         new = self._book_view()
         used = self._book_energy(plan)
-        curiosity = D.visit(0, w.ints, w.visits) if moved else 0.0
+        curiosity = D.visit(w.arrays, 0) if moved else 0.0
         intended = self.nearest_cell(self._target_m)
         off_target = cell != intended and not self._collided
         self._track_sum += float(np.linalg.norm(np.asarray(pose.position) - self._target_m))
@@ -381,12 +376,12 @@ class Mission:
 
         # The grid's own close of a step: battery, counters, reward terms, episode end. An
         # arrival off the intended cell counts where the grid counts a wind push.
-        D.close_step(
-            0, w.ints, w.energy, w.pf, w.pi, w.terms, w.flags, used, new, moved, cam_changed,
-            self._collided, off_target, curiosity,
-        )  # fmt: skip
+        outcome = D.StepOutcome(
+            float(used), int(new), moved, cam_changed, self._collided, off_target, float(curiosity)
+        )
+        D.close_step(w.arrays, w.params, 0, outcome)
         flags = w.flags[0]
-        terminated, truncated = bool(flags[D.F_TERMINATED]), bool(flags[D.F_TRUNCATED])
+        terminated, truncated = bool(flags["terminated"]), bool(flags["truncated"])
         self.done = terminated or truncated
         if self.done:
             self.end = self._end_reason(truncated)
@@ -438,8 +433,8 @@ class Mission:
         return used
 
     def _end_reason(self, truncated: bool) -> str:
-        row = self.world.ints[0]
-        if row[D.COVERED] >= row[D.COVERABLE]:
+        row = self.world.status[0]
+        if row["covered"] >= row["coverable"]:
             return "coverage"
         if not truncated and self.world.energy[0] <= 0.0:
             return "battery"
@@ -451,31 +446,20 @@ class Mission:
         size, the analogue of the grid's one view per step."""
         w = self.world
         cells = np.ascontiguousarray(np.argwhere(self._seen))
-        w.ints[0, D.FOOT_SUM] += self._last_fp
-        return int(
-            D.book_view(
-                0, cells, len(cells), w.ints, w.coverable, w.views, w.redmask, w.blk_todo, w.bx,
-                w.by, True,
-            )
-        )  # fmt: skip
+        w.status[0:1]["footprint_sum"] += self._last_fp
+        return int(D.book_view(w.arrays, 0, cells, True))
 
     def _observation(self) -> np.ndarray:
         w = self.world
-        build_observations(
-            self._index, w.ints, w.energy, w.capacity, w.step_limit, w.blocked, w.coverable,
-            w.views, w.blk_todo, w.blk_total, self.cfg.obs_window, self.obs, w.visits,
-            obs_extras(self.cfg),
-        )  # fmt: skip
+        build_observations(w.arrays, w.params, self._layout, self._index, self.obs)
         return self.obs[0].copy()
 
     def _info(self) -> dict[str, Any]:
         w = self.world
         metrics = {0: self.metrics()} if self.done else {}
         # The grid's valid-action rule, so a policy trained with masks flies with them too.
-        D.action_masks(self._index, w.ints, w.blocked, w.pi, self._masks)
-        snap = InfoSnapshot(
-            w.ints, w.terms, self._weights, w.flags, w.energy, w.capacity, metrics, self._masks
-        )
+        D.action_masks(w.arrays, w.params, self._index, self._masks)
+        snap = InfoSnapshot(w, self._weights, metrics, self._masks)
         return snap.info(0)
 
 

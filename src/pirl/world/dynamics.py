@@ -1,11 +1,15 @@
 """The rules of the grid world, compiled with numba and applied to a batch of worlds.
 
 A single environment is a batch of one: the single and batched environments call the same
-kernels, so they cannot disagree. Per-world integer state lives in one table ``ints`` whose
-columns are named below; per-world bookkeeping grids have the batch as first axis.
+kernels, so they cannot disagree. Every kernel reads the worlds' state from one
+:class:`~pirl.world.state.WorldArrays` ``w`` (per-world records ``w.status`` and ``w.flags``
+with named fields, bookkeeping grids with the batch as first axis) and the fixed settings from
+one :class:`~pirl.world.state.Params` ``p``.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -21,28 +25,12 @@ from pirl.config.grid import (
     ZOOM_MIN10,
     ZOOM_STEP10,
 )
-from pirl.world.footprint import footprint_cells
+from pirl.world.footprint import CameraPose, footprint_cells
 
-# Columns of the per-world integer table.
-PX, PY, PZ, TILT, PAN, ZOOM = 0, 1, 2, 3, 4, 5
-STEPS, COVERED, COVERABLE, RED_CELLS, MULTI_CELLS, VIEWS = 6, 7, 8, 9, 10, 11
-COLLISIONS, RED_STEPS, CAM_ACTIONS, N_OBS, FOOT_SUM, WIND_PUSHES = 12, 13, 14, 15, 16, 17
-N_INT_COLS = 18
-
-# Columns of the per-step flag table.
-F_COLLISION, F_REDUNDANT, F_IDLE, F_TERMINATED, F_TRUNCATED, F_WIND, F_NEW = 0, 1, 2, 3, 4, 5, 6
-N_FLAG_COLS = 7
-
-# Reward term columns, in the order of pirl.config.world.REWARD_TERMS.
+# Reward term columns of ``WorldArrays.terms``, in the order of pirl.config.world.REWARD_TERMS
+# (a vector, not a record: the reward is its dot product with the weights).
 T_COVERAGE, T_REDUNDANT, T_BATTERY, T_CAM, T_CURIOSITY, T_COLLISION, T_IDLE, T_LLM = range(8)
 N_TERMS = 8
-
-# Scalar parameters passed to the kernels (floats and ints, see WorldBatch.params).
-PF_FOV, PF_RANGE, PF_WIND, PF_E_MOVE, PF_E_CLIMB, PF_E_DESCEND, PF_E_CAM, PF_E_HOVER = range(8)
-PF_MAX_FP = 8
-N_PF = 9
-PI_MODEL, PI_OCCLUSION, PI_X, PI_Y, PI_Z, PI_STEP_LIMIT = range(6)
-N_PI = 6
 
 # Actions in the paper's order; the names say what each one does.
 X_PLUS, X_MINUS, Y_PLUS, Y_MINUS, Z_PLUS, Z_MINUS = 0, 1, 2, 3, 4, 5
@@ -62,6 +50,12 @@ MOVE_DELTAS: tuple[tuple[int, int, int], ...] = tuple(
 )
 WIND_DIRS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=np.int64)
 
+# Options of the loops over worlds (here and in pirl.env), compiled without numba's reference
+# counting: they allocate nothing, and with it every inlined call that passes the
+# WorldArrays tuple increfs and decrefs each of its arrays, which halved the env's throughput
+# (benchmarks/env_throughput.py). Functions that allocate (footprint_cells) keep it.
+BATCH_KERNEL = {"cache": True, "_nrt": False}
+
 
 @numba.njit(cache=True, inline="always")
 def _next_uniform(rng, e):
@@ -76,22 +70,26 @@ def _next_uniform(rng, e):
 
 
 @numba.njit(cache=True, inline="always")
-def _free(blocked, e, x, y, z, sx, sy, sz):
-    return 0 <= x < sx and 0 <= y < sy and 0 <= z < sz and not blocked[e, x, y, z]
+def free(blocked, p, e, x, y, z):
+    """Whether cell (x, y, z) of world e lies inside the grid and out of every obstacle."""
+    inside = 0 <= x < p.size_x and 0 <= y < p.size_y and 0 <= z < p.size_z
+    return inside and not blocked[e, x, y, z]
 
 
 @numba.njit(cache=True, inline="always")
-def book_view(e, cells, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant):
-    """Book one view of world e (the first ``n`` distinct rows (i, j) of ``cells``).
+def book_view(w, e, cells, mark_redundant):
+    """Book one view of world e: the distinct ground cells (rows (i, j)) of ``cells``.
 
     Counts new cells, views and cells seen twice, keeps the coarse map's per-block counts and,
     with ``mark_redundant``, marks the cells of a view that adds nothing as redundantly viewed
     (the set C_redundant of the RVC metric). Returns the number of new cells. The grid books
     its footprint here; the physics evaluation books the union of a flight's views here too.
     """
+    st = w.status[e]
+    coverable, views, redmask = w.coverable, w.views, w.redmask
     new = 0
     seen = 0
-    for k in range(n):
+    for k in range(cells.shape[0]):
         i, j = cells[k, 0], cells[k, 1]
         if not coverable[e, i, j]:
             continue
@@ -99,56 +97,60 @@ def book_view(e, cells, n, ints, coverable, views, redmask, blk_todo, bx, by, ma
         v = views[e, i, j]
         if v == 0:
             new += 1
-            blk_todo[e, bx[i], by[j]] -= 1
+            w.blk_todo[e, w.block_x[i], w.block_y[j]] -= 1
         elif v == 1:
-            ints[e, MULTI_CELLS] += 1
+            st["multi_cells"] += 1
         views[e, i, j] = v + 1
-    ints[e, COVERED] += new
-    ints[e, VIEWS] += seen
+    st["covered"] += new
+    st["cell_views"] += seen
     if new == 0 and mark_redundant:
-        for k in range(n):
+        for k in range(cells.shape[0]):
             i, j = cells[k, 0], cells[k, 1]
             if coverable[e, i, j] and not redmask[e, i, j]:
                 redmask[e, i, j] = True
-                ints[e, RED_CELLS] += 1
+                st["redundant_cells"] += 1
     return new
 
 
 @numba.njit(cache=True, inline="always")
-def observe(
-    e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf, mark_redundant
-):
-    """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
-    n = footprint_cells(
-        pi[PI_MODEL], ints[e, PX], ints[e, PY], ints[e, PZ], ints[e, TILT], ints[e, PAN],
-        ints[e, ZOOM], pi[PI_X], pi[PI_Y], pf[PF_FOV], pf[PF_RANGE], pi[PI_OCCLUSION] != 0,
-        obstacles[e], ints[e, N_OBS], buf,
-    )  # fmt: skip
-    ints[e, FOOT_SUM] += n
-    return book_view(e, buf, n, ints, coverable, views, redmask, blk_todo, bx, by, mark_redundant)
+def camera_pose(w, e):
+    """World e's camera as a :class:`~pirl.world.footprint.CameraPose` (grid integers)."""
+    st = w.status[e]
+    return CameraPose(st["x"], st["y"], st["z"], st["tilt"], st["pan"], st["zoom10"])
 
 
 @numba.njit(cache=True, inline="always")
-def camera_action(e, a, ints):
+def observe(w, p, e, mark_redundant):
+    """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
+    st = w.status[e]
+    buf = w.buf[e]
+    n = footprint_cells(p, camera_pose(w, e), w.obstacles[e, : st["n_obstacles"]], buf)
+    st["footprint_sum"] += n
+    return book_view(w, e, buf[:n], mark_redundant)
+
+
+@numba.njit(cache=True, inline="always")
+def camera_action(w, e, a):
     """Apply camera action ``a`` (6-11) to world e: steps of 5 degrees, 15 degrees and 0.1
     zoom; at a limit the setting holds. Counts the camera action."""
-    ints[e, CAM_ACTIONS] += 1
+    st = w.status[e]
+    st["camera_actions"] += 1
     if a == TILT_PLUS:
-        ints[e, TILT] = min(TILT_MAX, ints[e, TILT] + TILT_STEP)
+        st["tilt"] = min(TILT_MAX, st["tilt"] + TILT_STEP)
     elif a == TILT_MINUS:
-        ints[e, TILT] = max(TILT_MIN, ints[e, TILT] - TILT_STEP)
+        st["tilt"] = max(TILT_MIN, st["tilt"] - TILT_STEP)
     elif a == PAN_PLUS:
-        ints[e, PAN] = min(PAN_MAX, ints[e, PAN] + PAN_STEP)
+        st["pan"] = min(PAN_MAX, st["pan"] + PAN_STEP)
     elif a == PAN_MINUS:
-        ints[e, PAN] = max(PAN_MIN, ints[e, PAN] - PAN_STEP)
+        st["pan"] = max(PAN_MIN, st["pan"] - PAN_STEP)
     elif a == ZOOM_PLUS:
-        ints[e, ZOOM] = min(ZOOM_MAX10, ints[e, ZOOM] + ZOOM_STEP10)
+        st["zoom10"] = min(ZOOM_MAX10, st["zoom10"] + ZOOM_STEP10)
     else:
-        ints[e, ZOOM] = max(ZOOM_MIN10, ints[e, ZOOM] - ZOOM_STEP10)
+        st["zoom10"] = max(ZOOM_MIN10, st["zoom10"] - ZOOM_STEP10)
 
 
 @numba.njit(cache=True, inline="always")
-def action_mask(e, ints, blocked, pi, out):
+def action_mask(w, p, e, out):
     """Write into ``out[e]`` which of world e's 12 actions can change something.
 
     A move is valid when its cell lies inside the grid and is free; a camera action when its
@@ -156,121 +158,130 @@ def action_mask(e, ints, blocked, pi, out):
     a camera action that holds: it only spends energy, and a policy that repeats it loops.
     At least one tilt action is always valid, so a mask never rules out every action.
     """
-    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
-    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
+    st = w.status[e]
+    blocked = w.blocked
+    x, y, z = st["x"], st["y"], st["z"]
     for a in range(N_MOVES):
-        out[e, a] = _free(blocked, e, x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2], sx, sy, sz)
-    out[e, TILT_PLUS] = ints[e, TILT] < TILT_MAX
-    out[e, TILT_MINUS] = ints[e, TILT] > TILT_MIN
-    out[e, PAN_PLUS] = ints[e, PAN] < PAN_MAX
-    out[e, PAN_MINUS] = ints[e, PAN] > PAN_MIN
-    out[e, ZOOM_PLUS] = ints[e, ZOOM] < ZOOM_MAX10
-    out[e, ZOOM_MINUS] = ints[e, ZOOM] > ZOOM_MIN10
+        out[e, a] = free(blocked, p, e, x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2])
+    out[e, TILT_PLUS] = st["tilt"] < TILT_MAX
+    out[e, TILT_MINUS] = st["tilt"] > TILT_MIN
+    out[e, PAN_PLUS] = st["pan"] < PAN_MAX
+    out[e, PAN_MINUS] = st["pan"] > PAN_MIN
+    out[e, ZOOM_PLUS] = st["zoom10"] < ZOOM_MAX10
+    out[e, ZOOM_MINUS] = st["zoom10"] > ZOOM_MIN10
 
 
-@numba.njit(cache=True)
-def action_masks(worlds, ints, blocked, pi, out):
+@numba.njit(**BATCH_KERNEL)
+def action_masks(w, p, worlds, out):
     """:func:`action_mask` of each world index in ``worlds`` (after a reset)."""
     for k in range(worlds.shape[0]):
-        action_mask(worlds[k], ints, blocked, pi, out)
+        action_mask(w, p, worlds[k], out)
 
 
 @numba.njit(cache=True, inline="always")
-def visit(e, ints, visits):
+def visit(w, e):
     """Count a visit to world e's current cell; return its curiosity term 1/sqrt(visits)."""
-    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
-    visits[e, x, y, z] += 1
-    return 1.0 / np.sqrt(visits[e, x, y, z])
+    st = w.status[e]
+    w.visits[e, st["x"], st["y"], st["z"]] += 1
+    return 1.0 / np.sqrt(w.visits[e, st["x"], st["y"], st["z"]])
+
+
+class StepOutcome(NamedTuple):
+    """What one step did to a world, as :func:`close_step` books it."""
+
+    used: float
+    """Energy units the step spent."""
+    new: int
+    """Ground cells its view added."""
+    moved: bool
+    """Whether the UAV's cell changed."""
+    cam_changed: bool
+    """Whether tilt, pan or zoom changed."""
+    collision: bool
+    """Whether the move was blocked (an obstacle, the grid's edge, a contact in flight)."""
+    wind: bool
+    """Whether something other than the action moved the UAV (a gust, a drift)."""
+    curiosity: float
+    """The curiosity term of the cell moved into (0 without a move)."""
 
 
 @numba.njit(cache=True, inline="always")
-def close_step(
-    e, ints, energy, pf, pi, terms, flags, used, new, moved, cam_changed, collision, wind,
-    curiosity,
-):  # fmt: skip
-    """Book the end of world e's step: battery, counters, raw reward terms, episode end.
-
-    ``used`` is the energy the step spent, ``new`` the cells its view added; ``wind`` whether
-    something other than the action moved the UAV. Fills ``terms[e]`` and ``flags[e]``.
-    """
+def close_step(w, p, e, out):
+    """Book the end of world e's step (``out``, a :class:`StepOutcome`): battery, counters,
+    raw reward terms, episode end. Fills ``w.terms[e]`` and ``w.flags[e]``."""
+    st = w.status[e]
+    terms = w.terms
+    new = out.new
     redundant = new == 0
-    idle = not moved and not cam_changed and not collision
-    energy[e] -= used
-    ints[e, STEPS] += 1
-    if collision:
-        ints[e, COLLISIONS] += 1
+    idle = not out.moved and not out.cam_changed and not out.collision
+    w.energy[e] -= out.used
+    st["steps"] += 1
+    if out.collision:
+        st["collisions"] += 1
     if redundant:
-        ints[e, RED_STEPS] += 1
-    if wind:
-        ints[e, WIND_PUSHES] += 1
+        st["redundant_steps"] += 1
+    if out.wind:
+        st["wind_pushes"] += 1
 
-    terms[e, T_COVERAGE] = new / pf[PF_MAX_FP]
+    terms[e, T_COVERAGE] = new / p.max_footprint
     terms[e, T_REDUNDANT] = 1.0 if redundant else 0.0
-    terms[e, T_BATTERY] = used / pf[PF_E_MOVE]
-    terms[e, T_CAM] = 1.0 if (cam_changed and new > 0) else 0.0
-    terms[e, T_CURIOSITY] = curiosity
-    terms[e, T_COLLISION] = 1.0 if collision else 0.0
+    terms[e, T_BATTERY] = out.used / p.energy_move
+    terms[e, T_CAM] = 1.0 if (out.cam_changed and new > 0) else 0.0
+    terms[e, T_CURIOSITY] = out.curiosity
+    terms[e, T_COLLISION] = 1.0 if out.collision else 0.0
     terms[e, T_IDLE] = 1.0 if idle else 0.0
     terms[e, T_LLM] = 0.0
 
-    terminated = energy[e] <= 0.0 or ints[e, COVERED] >= ints[e, COVERABLE]
-    flags[e, F_COLLISION] = collision
-    flags[e, F_REDUNDANT] = redundant
-    flags[e, F_IDLE] = idle
-    flags[e, F_TERMINATED] = terminated
-    flags[e, F_TRUNCATED] = (not terminated) and ints[e, STEPS] >= pi[PI_STEP_LIMIT]
-    flags[e, F_WIND] = wind
-    flags[e, F_NEW] = new
+    terminated = w.energy[e] <= 0.0 or st["covered"] >= st["coverable"]
+    f = w.flags[e]
+    f["collision"] = out.collision
+    f["redundant"] = redundant
+    f["idle"] = idle
+    f["terminated"] = terminated
+    f["truncated"] = (not terminated) and st["steps"] >= p.step_limit
+    f["wind"] = out.wind
+    f["new_cells"] = new
 
 
 @numba.njit(cache=True, inline="always")
-def step_one(
-    e, actions, ints, energy, rng, blocked, coverable, views, redmask, visits, blk_todo, bx, by,
-    obstacles, pf, pi, buf, terms, flags,
-):  # fmt: skip
-    """Apply world e's action; fill its ``terms`` (raw reward terms) and ``flags``.
+def step_one(w, p, e, a):
+    """Apply action ``a`` to world e; fill its ``terms`` (raw reward terms) and ``flags``.
 
     Flight (a move to a free cell, else a collision) and the wind gust are the grid's own; the
     camera, the view, the visit and the step's close are the rules above, which the physics
     evaluation shares.
     """
-    sx, sy, sz = pi[PI_X], pi[PI_Y], pi[PI_Z]
-    a = actions[e]
-    x, y, z = ints[e, PX], ints[e, PY], ints[e, PZ]
-    tilt, pan, zoom = ints[e, TILT], ints[e, PAN], ints[e, ZOOM]
+    st = w.status[e]
+    x, y, z = st["x"], st["y"], st["z"]
+    tilt, pan, zoom = st["tilt"], st["pan"], st["zoom10"]
     collision = False
     if a < N_MOVES:
         nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
-        if _free(blocked, e, nx, ny, nz, sx, sy, sz):
-            ints[e, PX], ints[e, PY], ints[e, PZ] = nx, ny, nz
+        if free(w.blocked, p, e, nx, ny, nz):
+            st["x"], st["y"], st["z"] = nx, ny, nz
         else:
             collision = True
         if a < Z_PLUS:
-            used = pf[PF_E_MOVE]
+            used = p.energy_move
         elif a == Z_PLUS:
-            used = pf[PF_E_CLIMB]
+            used = p.energy_climb
         else:
-            used = pf[PF_E_DESCEND]
+            used = p.energy_descend
     else:
-        used = pf[PF_E_CAM]
-        camera_action(e, a, ints)
-    used += pf[PF_E_HOVER]
+        used = p.energy_camera
+        camera_action(w, e, a)
+    used += p.energy_hover
 
     wind = False
-    if pf[PF_WIND] > 0.0 and _next_uniform(rng, e) < pf[PF_WIND]:
-        d = min(3, int(_next_uniform(rng, e) * 4.0))
-        wx, wy = ints[e, PX] + WIND_DIRS[d, 0], ints[e, PY] + WIND_DIRS[d, 1]
-        if _free(blocked, e, wx, wy, ints[e, PZ], sx, sy, sz):
-            ints[e, PX], ints[e, PY] = wx, wy
+    if p.wind_prob > 0.0 and _next_uniform(w.rng, e) < p.wind_prob:
+        d = min(3, int(_next_uniform(w.rng, e) * 4.0))
+        wx, wy = st["x"] + WIND_DIRS[d, 0], st["y"] + WIND_DIRS[d, 1]
+        if free(w.blocked, p, e, wx, wy, st["z"]):
+            st["x"], st["y"] = wx, wy
             wind = True
 
-    moved = ints[e, PX] != x or ints[e, PY] != y or ints[e, PZ] != z
-    cam_changed = ints[e, TILT] != tilt or ints[e, PAN] != pan or ints[e, ZOOM] != zoom
-    new = observe(
-        e, ints, coverable, views, redmask, blk_todo, bx, by, obstacles, pf, pi, buf[e], True
-    )
-    curiosity = visit(e, ints, visits) if moved else 0.0
-    close_step(
-        e, ints, energy, pf, pi, terms, flags, used, new, moved, cam_changed, collision, wind,
-        curiosity,
-    )  # fmt: skip
+    moved = st["x"] != x or st["y"] != y or st["z"] != z
+    cam_changed = st["tilt"] != tilt or st["pan"] != pan or st["zoom10"] != zoom
+    new = observe(w, p, e, True)
+    curiosity = visit(w, e) if moved else 0.0
+    close_step(w, p, e, StepOutcome(used, new, moved, cam_changed, collision, wind, curiosity))

@@ -15,6 +15,7 @@ Coordinates: cell ``(x, y, z)`` has its centre at ``(x, y, z)``; the ground plan
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -25,6 +26,49 @@ FRUSTUM = 1
 PAPER_MAX_HALF = 4
 
 
+class Lens(NamedTuple):
+    """The footprint model and the ground it projects onto (fixed for a world's lifetime)."""
+
+    model: int
+    """:data:`PAPER` or :data:`FRUSTUM`."""
+    size_x: int
+    """Ground cells along x (footprints are clipped to the grid)."""
+    size_y: int
+    """Ground cells along y."""
+    fov_deg: float
+    """Horizontal field of view at zoom 1.0, degrees (frustum model)."""
+    max_range: float
+    """Ground points farther than this many cells are cut to it (frustum model)."""
+    occlusion: bool
+    """Whether obstacle spheres hide the ground cells behind them (frustum model)."""
+
+
+class CameraPose(NamedTuple):
+    """Where the camera is and how it points: integers on the grid, floats in flight."""
+
+    x: float
+    """Position along x in cell units (cell i is centred at i)."""
+    y: float
+    """Position along y in cell units."""
+    z: float
+    """Level: the camera flies ``z + 1`` cells above the ground."""
+    tilt: float
+    """Degrees below the horizon (90 looks straight down)."""
+    pan: float
+    """Degrees of yaw in the world frame (0 = +x)."""
+    zoom10: int
+    """Zoom in tenths (10 = 1.0)."""
+
+
+def lens_of(
+    model: int, size: tuple[int, ...], fov_deg: float, max_range: float, occlusion: bool
+) -> Lens:
+    """The :class:`Lens` of a world of ``size`` (typed as the kernels expect)."""
+    return Lens(
+        int(model), int(size[0]), int(size[1]), float(fov_deg), float(max_range), bool(occlusion)
+    )
+
+
 @numba.njit(cache=True, inline="always")
 def paper_half_width(tilt: int, zoom10: int) -> int:
     """Half-width of the paper model's square: floor(m * zoom + 0.5) in integer arithmetic."""
@@ -33,12 +77,13 @@ def paper_half_width(tilt: int, zoom10: int) -> int:
 
 
 @numba.njit(cache=True)
-def _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, out):
-    """Write the 4 ground corners (out[4, 2]) of the frustum, in cell coordinates."""
-    t = math.radians(tilt)
-    p = math.radians(pan)
-    height = z + 1.0
-    th = math.tan(math.radians(fov_deg) / 2.0) / (zoom10 / 10.0)
+def frustum_corners(lens, pose, out):
+    """Write the 4 ground corners (out[4, 2]) of the frustum of ``pose``, in cell coordinates."""
+    t = math.radians(pose.tilt)
+    p = math.radians(pose.pan)
+    height = pose.z + 1.0
+    max_range = lens.max_range
+    th = math.tan(math.radians(lens.fov_deg) / 2.0) / (pose.zoom10 / 10.0)
     tv = th * 0.75
     fx, fy, fz = math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)
     rx, ry = math.sin(p), -math.cos(p)
@@ -60,8 +105,8 @@ def _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, out):
             gx, gy = dx / horiz * max_range, dy / horiz * max_range
         else:
             gx, gy = 0.0, 0.0
-        out[k, 0] = x + gx
-        out[k, 1] = y + gy
+        out[k, 0] = pose.x + gx
+        out[k, 1] = pose.y + gy
 
 
 @numba.njit(cache=True)
@@ -88,12 +133,12 @@ def _inside(px, py, poly):
 
 
 @numba.njit(cache=True)
-def _occluded(cx, cy, cz, gx, gy, obstacles, n_obs):
+def _occluded(cx, cy, cz, gx, gy, obstacles):
     """True when the segment camera -> ground cell centre crosses an obstacle sphere."""
     gz = -1.0
     dx, dy, dz = gx - cx, gy - cy, gz - cz
     seg2 = dx * dx + dy * dy + dz * dz
-    for k in range(n_obs):
+    for k in range(obstacles.shape[0]):
         ox, oy, oz, r = obstacles[k, 0], obstacles[k, 1], obstacles[k, 2], obstacles[k, 3]
         t = ((ox - cx) * dx + (oy - cy) * dy + (oz - cz) * dz) / seg2
         t = min(1.0, max(0.0, t))
@@ -104,41 +149,42 @@ def _occluded(cx, cy, cz, gx, gy, obstacles, n_obs):
 
 
 @numba.njit(cache=True)
-def footprint_cells(
-    model, x, y, z, tilt, pan, zoom10, size_x, size_y, fov_deg, max_range, occlusion,
-    obstacles, n_obs, out,
-):  # fmt: skip
-    """Write the seen ground cells as rows (i, j) of ``out`` and return their count.
+def footprint_cells(lens, pose, obstacles, out):
+    """Write the ground cells ``pose`` sees through ``lens`` as rows (i, j) of ``out``; return
+    their count.
 
-    ``out`` must hold at least :func:`max_footprint_cells` rows.
+    ``lens`` is a :class:`Lens` or a tuple with its fields (a world's ``Params``); ``pose`` a
+    grid :class:`CameraPose` (integers); ``obstacles`` the rows (cx, cy, cz, r) that may
+    occlude. ``out`` must hold at least :func:`buffer_rows` rows.
     """
-    if model == PAPER:
+    if lens.model == PAPER:
         n = 0
-        h = paper_half_width(tilt, zoom10)
-        for i in range(max(0, x - h), min(size_x, x + h + 1)):
-            for j in range(max(0, y - h), min(size_y, y + h + 1)):
+        h = paper_half_width(pose.tilt, pose.zoom10)
+        x, y = pose.x, pose.y
+        for i in range(max(0, x - h), min(lens.size_x, x + h + 1)):
+            for j in range(max(0, y - h), min(lens.size_y, y + h + 1)):
                 out[n, 0] = i
                 out[n, 1] = j
                 n += 1
         return n
     poly = np.empty((4, 2))
-    _frustum_corners(x, y, z, tilt, pan, zoom10, fov_deg, max_range, poly)
-    return frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out)
+    frustum_corners(lens, pose, poly)
+    return frustum_scan(lens, pose, poly, obstacles, out)
 
 
 @numba.njit(cache=True)
-def frustum_scan(poly, x, y, z, size_x, size_y, occlusion, obstacles, n_obs, out):
-    """Write the ground cells inside ground polygon ``poly`` (seen from a camera at x, y, z,
-    occlusion optional) as rows of ``out``; return their count."""
+def frustum_scan(lens, pose, poly, obstacles, out):
+    """Write the ground cells inside ground polygon ``poly`` (seen from ``pose``, occluded by
+    ``obstacles`` when the lens says so) as rows of ``out``; return their count."""
     x0 = max(0, int(math.floor(poly[:, 0].min())))
-    x1 = min(size_x - 1, int(math.ceil(poly[:, 0].max())))
+    x1 = min(lens.size_x - 1, int(math.ceil(poly[:, 0].max())))
     y0 = max(0, int(math.floor(poly[:, 1].min())))
-    y1 = min(size_y - 1, int(math.ceil(poly[:, 1].max())))
+    y1 = min(lens.size_y - 1, int(math.ceil(poly[:, 1].max())))
     n = 0
     for i in range(x0, x1 + 1):
         for j in range(y0, y1 + 1):
             if _inside(i, j, poly):
-                if occlusion and _occluded(x, y, z, i, j, obstacles, n_obs):
+                if lens.occlusion and _occluded(pose.x, pose.y, pose.z, i, j, obstacles):
                     continue
                 out[n, 0] = i
                 out[n, 1] = j
@@ -157,16 +203,14 @@ def max_footprint_cells(model: int, size_z: int, fov_deg: float, max_range: floa
     side = 2 * span + 1
     out = np.empty((side * side, 2), dtype=np.int64)
     empty = np.zeros((0, 4))
+    lens = lens_of(FRUSTUM, (side, side), fov_deg, max_range, False)
     best = 0
     for z in range(size_z):
         for tilt in range(0, 91, 5):
             for pan in (0, 45):
                 for zoom10 in range(5, 21):
-                    n = footprint_cells(
-                        FRUSTUM, span, span, z, tilt, pan, zoom10, side, side,
-                        fov_deg, max_range, False, empty, 0, out,
-                    )  # fmt: skip
-                    best = max(best, n)
+                    pose = CameraPose(span, span, z, tilt, pan, zoom10)
+                    best = max(best, footprint_cells(lens, pose, empty, out))
     return best
 
 

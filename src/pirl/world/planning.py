@@ -18,7 +18,7 @@ import numpy as np
 
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells
+from pirl.world.footprint import FRUSTUM, PAPER, CameraPose, buffer_rows, footprint_cells, lens_of
 from pirl.world.state import WorldBatch
 
 Cell = tuple[int, int, int]
@@ -45,15 +45,14 @@ class WorldView:
     def of(cls, world: WorldBatch, e: int, copy: bool = False) -> WorldView:
         """World ``e``'s view: live arrays (``copy=False``) or a frozen snapshot."""
         take = (lambda a: a.copy()) if copy else (lambda a: a)
-        row = world.ints[e]
         return cls(
             cfg=world.cfg,
             blocked=take(world.blocked[e]),
             coverable=take(world.coverable[e]),
             views=take(world.views[e]),
             obstacles=world.obstacle_list(e),
-            position=(int(row[D.PX]), int(row[D.PY]), int(row[D.PZ])),
-            camera=(int(row[D.TILT]), int(row[D.PAN]), int(row[D.ZOOM])),
+            position=world.position(e),
+            camera=world.camera_setting(e),
             energy=float(world.energy[e]),
         )
 
@@ -61,12 +60,10 @@ class WorldView:
         """Ground cells (k, 2) seen from ``pose`` with ``camera``."""
         cfg = self.cfg
         model = PAPER if cfg.footprint == "paper" else FRUSTUM
+        lens = lens_of(model, cfg.size, cfg.fov_deg, cfg.max_range, cfg.occlusion)
         buf = np.empty((buffer_rows(model, cfg.max_range), 2), dtype=np.int64)
-        n = footprint_cells(
-            model, int(pose[0]), int(pose[1]), int(pose[2]), int(camera[0]), int(camera[1]),
-            int(camera[2]), cfg.size[0], cfg.size[1], cfg.fov_deg, cfg.max_range,
-            cfg.occlusion, self.obstacles, len(self.obstacles), buf,
-        )  # fmt: skip
+        at = CameraPose(*(int(v) for v in pose), *(int(v) for v in camera))
+        n = footprint_cells(lens, at, np.asarray(self.obstacles, dtype=np.float64), buf)
         return buf[:n]
 
     def useful(self, pose: Cell, camera: Camera) -> bool:

@@ -1,15 +1,19 @@
-"""A batch of grid worlds: the state arrays and scenario generation (reset).
+"""A batch of grid worlds: the named state arrays, the fixed parameters, scenario generation.
 
-:class:`WorldBatch` owns the numpy arrays of N worlds of one size; the compiled rules of
-:mod:`pirl.world.dynamics` read and write them (stepped by :class:`pirl.env.core.EnvCore`,
-whose one fused kernel also weighs rewards and builds observations). Scenario generation (obstacles,
-start cell, wind stream) draws from a ``numpy.random.Generator`` per world, so a world reset
-with seed s is the same whether it lives alone or in a batch.
+:class:`WorldBatch` owns the numpy arrays of N worlds of one size, grouped in one
+:class:`WorldArrays`, and the settings the rules read, in one :class:`Params`; the compiled
+rules of :mod:`pirl.world.dynamics` take both (stepped by :class:`pirl.env.core.EnvCore`, whose
+one fused kernel also weighs rewards and builds observations). Per-world scalars are numpy
+records (:data:`STATUS_DTYPE`, :data:`FLAGS_DTYPE`) so that both numba and numpy read them by
+name: ``w.status[e]["covered"]`` in a kernel, ``world.status["covered"]`` for every world at once.
+Scenario generation (obstacles, start cell, wind stream) draws from a ``numpy.random.Generator``
+per world, so a world reset with seed s is the same whether it lives alone or in a batch.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -18,9 +22,137 @@ from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.footprint import FRUSTUM, PAPER, buffer_rows, footprint_cells, max_footprint_cells
+from pirl.world.footprint import (
+    FRUSTUM,
+    PAPER,
+    CameraPose,
+    buffer_rows,
+    footprint_cells,
+    lens_of,
+    max_footprint_cells,
+)
 
 _MAX_SCENARIO_TRIES = 200
+
+STATUS_DTYPE = np.dtype(
+    [
+        (name, np.int64)
+        for name in (
+            "x", "y", "z", "tilt", "pan", "zoom10", "steps", "covered", "coverable",
+            "redundant_cells", "multi_cells", "cell_views", "collisions", "redundant_steps",
+            "camera_actions", "n_obstacles", "footprint_sum", "wind_pushes",
+        )
+    ],
+    align=True,
+)  # fmt: skip
+"""One world's integer state: cell (x, y, z), camera (tilt and pan degrees, zoom in tenths)
+and the episode's counters: steps, covered and coverable ground cells, cells seen by a
+redundant step, cells seen twice or more, coverable-cell views, collisions, redundant steps,
+camera actions, obstacles, summed footprint sizes and wind pushes."""
+
+FLAGS_DTYPE = np.dtype(
+    [
+        (name, np.int64)
+        for name in (
+            "collision", "redundant", "idle", "terminated", "truncated", "wind", "new_cells"
+        )
+    ],
+    align=True,
+)  # fmt: skip
+"""What one world's last step did (0/1 events, and the count of new cells)."""
+
+STATE_ARRAYS = (
+    "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
+    "blk_total", "obstacles", "terms", "flags",
+)  # fmt: skip
+"""The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
+lookups and scratch space derived from the config."""
+
+
+def copy_records(records: np.ndarray) -> np.ndarray:
+    """A read-only copy of a 1-D record array, made as bytes: numpy copies records field by
+    field, ten times slower, and every step's info snapshot copies them."""
+    return np.frombuffer(records.tobytes(), dtype=records.dtype)
+
+
+class WorldArrays(NamedTuple):
+    """The arrays of N worlds of one size (first axis = world), as the kernels take them."""
+
+    status: np.ndarray
+    """(N,) records of :data:`STATUS_DTYPE`: pose, camera and counters. ``status[e]["x"]``
+    reads and writes the same in numba and in plain Python (a record is a view)."""
+    energy: np.ndarray
+    """(N,) battery energy units left."""
+    rng: np.ndarray
+    """(N,) uint64 state of each world's wind stream (splitmix64)."""
+    blocked: np.ndarray
+    """(N, X, Y, Z) cells inside an obstacle."""
+    coverable: np.ndarray
+    """(N, X, Y) ground cells that count for coverage."""
+    views: np.ndarray
+    """(N, X, Y) how many steps saw each ground cell."""
+    redmask: np.ndarray
+    """(N, X, Y) cells seen by a redundant step (C_redundant of the RVC metric)."""
+    visits: np.ndarray
+    """(N, X, Y, Z) visits of each cell this episode."""
+    blk_todo: np.ndarray
+    """(N, G, G) coverable cells of each coarse block not yet covered."""
+    blk_total: np.ndarray
+    """(N, G, G) coverable cells of each coarse block."""
+    obstacles: np.ndarray
+    """(N, max_obstacles, 4) spheres (cx, cy, cz, radius); ``status["n_obstacles"]`` are used."""
+    terms: np.ndarray
+    """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
+    flags: np.ndarray
+    """(N,) records of :data:`FLAGS_DTYPE`: the last step's events."""
+    block_x: np.ndarray
+    """(X,) coarse block of each x (a lookup, the same for every world)."""
+    block_y: np.ndarray
+    """(Y,) coarse block of each y."""
+    buf: np.ndarray
+    """(N, rows, 2) scratch rows for each world's footprint."""
+
+
+class Params(NamedTuple):
+    """The settings the rules read, fixed for a batch's lifetime (typed as the kernels expect).
+
+    Its first six fields are those of :class:`~pirl.world.footprint.Lens`, so the footprint
+    functions take a Params as their lens: numba's parallel loops cannot take a tuple nested
+    in a tuple, so the lens is not a field of its own.
+    """
+
+    model: int
+    """Footprint model, :data:`~pirl.world.footprint.PAPER` or ``FRUSTUM``."""
+    size_x: int
+    """Cells along x."""
+    size_y: int
+    """Cells along y."""
+    fov_deg: float
+    """Horizontal field of view at zoom 1.0, degrees (frustum model)."""
+    max_range: float
+    """Ground points farther than this many cells are cut to it (frustum model)."""
+    occlusion: bool
+    """Whether obstacle spheres hide the ground behind them (frustum model)."""
+    size_z: int
+    """Flight levels."""
+    step_limit: int
+    """Steps before an episode is truncated (scaled by alpha)."""
+    capacity: float
+    """Battery energy units when full (scaled by alpha)."""
+    wind_prob: float
+    """Probability of a gust after each action."""
+    energy_move: float
+    """Energy of an x/y move (also the unit of the battery reward term)."""
+    energy_climb: float
+    """Energy of a z+ move."""
+    energy_descend: float
+    """Energy of a z- move."""
+    energy_camera: float
+    """Energy of a camera action."""
+    energy_hover: float
+    """Energy spent every step on top of the action's."""
+    max_footprint: float
+    """Cells of the largest possible footprint (the unit of the coverage reward term)."""
 
 
 @dataclass(frozen=True)
@@ -89,21 +221,25 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
 
 
 @numba.njit(cache=True)
-def _reset_bookkeeping(e, ints, views, redmask, visits, blk_todo, blk_total, coverable, bx, by):
-    views[e] = 0
-    redmask[e] = False
-    visits[e] = 0
-    blk_todo[e] = 0
-    blk_total[e] = 0
+def _reset_bookkeeping(w, p, e):
+    """Zero world e's bookkeeping, count its coverable cells and take the first view."""
+    w.views[e] = 0
+    w.redmask[e] = False
+    w.visits[e] = 0
+    w.blk_todo[e] = 0
+    w.blk_total[e] = 0
     n = 0
-    for i in range(coverable.shape[1]):
-        for j in range(coverable.shape[2]):
-            if coverable[e, i, j]:
+    for i in range(w.coverable.shape[1]):
+        for j in range(w.coverable.shape[2]):
+            if w.coverable[e, i, j]:
                 n += 1
-                blk_todo[e, bx[i], by[j]] += 1
-                blk_total[e, bx[i], by[j]] += 1
-    ints[e, D.COVERABLE] = n
-    visits[e, ints[e, D.PX], ints[e, D.PY], ints[e, D.PZ]] = 1
+                w.blk_todo[e, w.block_x[i], w.block_y[j]] += 1
+                w.blk_total[e, w.block_x[i], w.block_y[j]] += 1
+    st = w.status[e]
+    st["coverable"] = n
+    w.visits[e, st["x"], st["y"], st["z"]] = 1
+    # The camera sees before the first action; that first view earns no reward.
+    D.observe(w, p, e, False)
 
 
 class WorldBatch:
@@ -113,11 +249,8 @@ class WorldBatch:
     It is off by default: on a small shared machine (2 cores, with training and an LLM busy) a
     parallel step waits for its slowest thread and can be far slower than one thread.
 
-    Public arrays (first axis = world): ``ints`` (see the column constants in
-    :mod:`pirl.world.dynamics`), ``energy`` (units left), ``blocked`` (X, Y, Z), ``coverable``
-    and ``views`` (X, Y; views = how many steps saw the cell), ``redmask`` (cells seen by a
-    redundant step), ``visits`` (X, Y, Z), ``obstacles`` (max_obstacles, 4). After a step:
-    ``terms`` (raw reward terms) and ``flags`` (per-step events).
+    The arrays are :attr:`arrays` (a :class:`WorldArrays`; each field is also an attribute,
+    e.g. ``world.status``) and the settings :attr:`params` (a :class:`Params`).
     """
 
     def __init__(self, cfg: VCPPConfig, num: int, parallel: bool | None = None) -> None:
@@ -132,38 +265,54 @@ class WorldBatch:
         self.step_limit = int(cfg.step_limit)
         self.max_obstacles = max(1, cfg.obstacle_count_range[1])
         self.max_footprint = max_footprint_cells(self.model, sz, cfg.fov_deg, cfg.max_range)
-
-        self.ints = np.zeros((num, D.N_INT_COLS), dtype=np.int64)
-        self.energy = np.zeros(num, dtype=np.float64)
-        self.rng = np.zeros(num, dtype=np.uint64)
-        self.blocked = np.zeros((num, sx, sy, sz), dtype=np.bool_)
-        self.coverable = np.zeros((num, sx, sy), dtype=np.bool_)
-        self.views = np.zeros((num, sx, sy), dtype=np.int32)
-        self.redmask = np.zeros((num, sx, sy), dtype=np.bool_)
-        self.visits = np.zeros((num, sx, sy, sz), dtype=np.int32)
-        self.blk_todo = np.zeros((num, g, g), dtype=np.int32)
-        self.blk_total = np.zeros((num, g, g), dtype=np.int32)
-        self.bx = (np.arange(sx) * g // sx).astype(np.int64)
-        self.by = (np.arange(sy) * g // sy).astype(np.int64)
-        self.obstacles = np.zeros((num, self.max_obstacles, 4), dtype=np.float64)
-        self.terms = np.zeros((num, D.N_TERMS), dtype=np.float64)
-        self.flags = np.zeros((num, D.N_FLAG_COLS), dtype=np.int64)
-        self.buf = np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64)
         self.parallel = bool(parallel) and num > 1
-
-        self.pf = np.zeros(D.N_PF, dtype=np.float64)
-        self.pf[D.PF_FOV] = cfg.fov_deg
-        self.pf[D.PF_RANGE] = cfg.max_range
-        self.pf[D.PF_WIND] = cfg.wind_prob
-        self.pf[D.PF_E_MOVE] = cfg.energy_move
-        self.pf[D.PF_E_CLIMB] = cfg.energy_climb
-        self.pf[D.PF_E_DESCEND] = cfg.energy_descend
-        self.pf[D.PF_E_CAM] = cfg.energy_camera
-        self.pf[D.PF_E_HOVER] = cfg.energy_hover
-        self.pf[D.PF_MAX_FP] = self.max_footprint
-        self.pi = np.array(
-            [self.model, int(cfg.occlusion), sx, sy, sz, self.step_limit], dtype=np.int64
+        self.lens = lens_of(self.model, cfg.size, cfg.fov_deg, cfg.max_range, cfg.occlusion)
+        self.arrays = WorldArrays(
+            status=np.zeros(num, dtype=STATUS_DTYPE),
+            energy=np.zeros(num, dtype=np.float64),
+            rng=np.zeros(num, dtype=np.uint64),
+            blocked=np.zeros((num, sx, sy, sz), dtype=np.bool_),
+            coverable=np.zeros((num, sx, sy), dtype=np.bool_),
+            views=np.zeros((num, sx, sy), dtype=np.int32),
+            redmask=np.zeros((num, sx, sy), dtype=np.bool_),
+            visits=np.zeros((num, sx, sy, sz), dtype=np.int32),
+            blk_todo=np.zeros((num, g, g), dtype=np.int32),
+            blk_total=np.zeros((num, g, g), dtype=np.int32),
+            obstacles=np.zeros((num, self.max_obstacles, 4), dtype=np.float64),
+            terms=np.zeros((num, D.N_TERMS), dtype=np.float64),
+            flags=np.zeros(num, dtype=FLAGS_DTYPE),
+            block_x=(np.arange(sx) * g // sx).astype(np.int64),
+            block_y=(np.arange(sy) * g // sy).astype(np.int64),
+            buf=np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64),
         )
+        self.params = Params(
+            *self.lens,
+            size_z=int(sz),
+            step_limit=self.step_limit,
+            capacity=self.capacity,
+            wind_prob=float(cfg.wind_prob),
+            energy_move=float(cfg.energy_move),
+            energy_climb=float(cfg.energy_climb),
+            energy_descend=float(cfg.energy_descend),
+            energy_camera=float(cfg.energy_camera),
+            energy_hover=float(cfg.energy_hover),
+            max_footprint=float(self.max_footprint),
+        )
+        # Each array also by name (world.status, world.views, ...): the same objects, listed
+        # once, in WorldArrays; plain attributes, as a step reads several of them.
+        vars(self).update(self.arrays._asdict())
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Copies of every state array (:data:`STATE_ARRAYS`), enough to continue exactly."""
+        return {name: getattr(self.arrays, name).copy() for name in STATE_ARRAYS}
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
+        missing = set(STATE_ARRAYS) - set(state)
+        if missing:
+            raise ValueError(f"world state lacks {sorted(missing)}")
+        for name in STATE_ARRAYS:
+            getattr(self.arrays, name)[...] = state[name]
 
     # -- reset ----------------------------------------------------------------------------
     def reset_world(self, e: int, rng: np.random.Generator) -> Scenario:
@@ -184,29 +333,22 @@ class WorldBatch:
             raise ConfigError(f"scenario start {scenario.start} lies outside the grid {cfg.size}")
         if blocked[start]:
             raise ConfigError(f"scenario start {start} lies inside an obstacle")
-        self.obstacles[e] = 0.0
-        self.obstacles[e, :n] = scenario.obstacles
-        self.blocked[e] = blocked
-        self.coverable[e] = ~self.blocked[e, :, :, 0]
-        row = self.ints[e]
-        row[:] = 0
-        row[D.PX], row[D.PY], row[D.PZ] = start
+        w = self.arrays
+        w.obstacles[e] = 0.0
+        w.obstacles[e, :n] = scenario.obstacles
+        w.blocked[e] = blocked
+        w.coverable[e] = ~w.blocked[e, :, :, 0]
+        w.status[e] = 0
+        st = w.status[e : e + 1]  # a view: numpy writes a record's fields through it
+        st["x"], st["y"], st["z"] = start
         camera = scenario.camera or (cfg.start_tilt, cfg.start_pan, cfg.start_zoom10)
-        row[D.TILT], row[D.PAN], row[D.ZOOM] = camera
-        row[D.N_OBS] = n
-        self.energy[e] = self.capacity
-        self.rng[e] = np.uint64(scenario.wind_seed)
-        _reset_bookkeeping(
-            e, self.ints, self.views, self.redmask, self.visits, self.blk_todo, self.blk_total,
-            self.coverable, self.bx, self.by,
-        )  # fmt: skip
-        # The camera sees before the first action; that first view earns no reward.
-        D.observe(
-            e, self.ints, self.coverable, self.views, self.redmask, self.blk_todo, self.bx,
-            self.by, self.obstacles, self.pf, self.pi, self.buf[e], False,
-        )  # fmt: skip
-        self.terms[e] = 0.0
-        self.flags[e] = 0
+        st["tilt"], st["pan"], st["zoom10"] = camera
+        st["n_obstacles"] = n
+        w.energy[e] = self.capacity
+        w.rng[e] = np.uint64(scenario.wind_seed)
+        _reset_bookkeeping(w, self.params, e)
+        w.terms[e] = 0.0
+        w.flags[e] = 0
 
     # -- queries --------------------------------------------------------------------------
     def footprint(
@@ -219,15 +361,11 @@ class WorldBatch:
 
         ``camera`` is (tilt degrees, pan degrees, zoom tenths).
         """
-        row = self.ints[e]
-        x, y, z = pose if pose is not None else (row[D.PX], row[D.PY], row[D.PZ])
-        tilt, pan, zoom10 = camera if camera is not None else (row[D.TILT], row[D.PAN], row[D.ZOOM])
+        x, y, z = pose if pose is not None else self.position(e)
+        tilt, pan, zoom10 = camera if camera is not None else self.camera_setting(e)
         buf = np.empty_like(self.buf[e])
-        n = footprint_cells(
-            self.model, int(x), int(y), int(z), int(tilt), int(pan), int(zoom10),
-            self.cfg.size[0], self.cfg.size[1], self.cfg.fov_deg, self.cfg.max_range,
-            self.cfg.occlusion, self.obstacles[e], int(row[D.N_OBS]), buf,
-        )  # fmt: skip
+        at = CameraPose(int(x), int(y), int(z), int(tilt), int(pan), int(zoom10))
+        n = footprint_cells(self.lens, at, self.obstacle_list(e), buf)
         return buf[:n].copy()
 
     def covered(self, e: int) -> np.ndarray:
@@ -235,20 +373,43 @@ class WorldBatch:
         return self.views[e] > 0
 
     def position(self, e: int) -> tuple[int, int, int]:
-        r = self.ints[e]
-        return int(r[D.PX]), int(r[D.PY]), int(r[D.PZ])
+        """Cell (x, y, z) of world ``e``."""
+        r = self.status[e]
+        return int(r["x"]), int(r["y"]), int(r["z"])
+
+    def positions(self, worlds: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(k, 3) int64 cells of ``worlds`` (all by default)."""
+        st = self.status[worlds]
+        return np.stack([st["x"], st["y"], st["z"]], axis=-1)
 
     def camera(self, e: int) -> tuple[int, int, float]:
         """(tilt degrees, pan degrees, zoom factor) of world ``e``."""
-        r = self.ints[e]
-        return int(r[D.TILT]), int(r[D.PAN]), r[D.ZOOM] / 10.0
+        tilt, pan, zoom10 = self.camera_setting(e)
+        return tilt, pan, zoom10 / 10.0
+
+    def camera_setting(self, e: int) -> tuple[int, int, int]:
+        """(tilt degrees, pan degrees, zoom tenths) of world ``e``: the integers the rules use."""
+        r = self.status[e]
+        return int(r["tilt"]), int(r["pan"]), int(r["zoom10"])
 
     def battery(self, e: int) -> float:
         """Battery of world ``e`` normalized to [0, 1]."""
         return max(0.0, float(self.energy[e]) / self.capacity)
 
     def obstacle_list(self, e: int) -> np.ndarray:
-        return self.obstacles[e, : int(self.ints[e, D.N_OBS])].copy()
+        """Obstacle spheres (n, 4) of world ``e``: rows (cx, cy, cz, radius)."""
+        return self.obstacles[e, : int(self.status[e]["n_obstacles"])].copy()
 
 
-__all__ = ["Scenario", "WorldBatch", "blocked_grid", "draw_scenario"]
+__all__ = [
+    "FLAGS_DTYPE",
+    "STATE_ARRAYS",
+    "STATUS_DTYPE",
+    "Params",
+    "Scenario",
+    "WorldArrays",
+    "WorldBatch",
+    "blocked_grid",
+    "copy_records",
+    "draw_scenario",
+]
