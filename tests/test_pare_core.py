@@ -11,7 +11,6 @@ from pirl.advice.state import view_prompt_state
 from pirl.env import make_vec_env
 from pirl.pare import alignment, f_llm
 from pirl.pare.core import HAS, KIND_CACHED, KIND_STUDENT, KIND_TEACHER, STATUSES, Weights, shape
-from pirl.world import dynamics as D
 
 
 def test_shape_is_a_function_of_poses_advice_and_weights():
@@ -58,4 +57,4 @@ def test_prompt_state_of_a_view_says_what_the_world_batch_says():
             assert state.battery == world.battery(e)
             assert state.position == world.position(e)
             assert (state.tilt, state.pan, state.zoom) == world.camera(e)
-            assert len(state.obstacles) == row[D.N_OBS]
+            assert len(state.obstacles) == row["n_obstacles"]
