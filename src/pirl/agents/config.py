@@ -74,7 +74,8 @@ class PareSettings:
     """PIRL's reward shaping (DESIGN.md section 5)."""
 
     advisor: str = "local"
-    """'local' (embedded model), 'openai' (any OpenAI-compatible server) or 'oracle'."""
+    """'local' (embedded model), 'openai' (any OpenAI-compatible server), 'oracle' or an
+    installed plugin's name (pirl.advice.registry checks it when the advisor is built)."""
     mode: str = "student"
     """'student' (a distilled advisor answers every step; the teacher is asked at
     teacher_rate), 'sync' (the paper's timing: the answer about s_t shapes r_{t+1}) or 'async'
@@ -337,7 +338,6 @@ def _validate(cfg: RunConfig) -> None:
     choices = {
         "ppo.lr_schedule": (p.lr_schedule, ("constant", "linear")),
         "ppo.device": (p.device, ("auto", "cpu", "cuda")),
-        "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
         "pare.mode": (pare.mode, ("student", "sync", "async")),
         "pare.prompt_variant": (pare.prompt_variant, ("paper", "compact")),
     }

@@ -32,7 +32,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
-from pirl.agents.loading import LABELS
+from pirl.agents.methods import PPO_METHODS, TRAIN_PPO, label
+from pirl.agents.methods import method as method_entry
 from pirl.agents.run_folder import (
     git_commit,
     prepare_run_folder,
@@ -44,20 +45,19 @@ from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.wrapper import AdvisorFailing
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 
-PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
 EPISODE_COLUMNS = (
     "timesteps", "world", "vcr", "be", "rvc", "overlap", "steps", "collisions", "battery_left",
     "camera_share", "mean_footprint",
 )  # fmt: skip
 
 
-def env_config_for(method: str, cfg: RunConfig) -> VCPPConfig:
-    """The environment a method trains on: static weights for PPO-SR, EWRI otherwise, and the
-    LLM weight switched on for PIRL."""
-    if method not in PPO_METHODS:
-        raise ConfigError(f"method {method!r}: PPO methods are {', '.join(PPO_METHODS)}")
-    reward = "static" if method == "ppo-sr" else "ewri"
-    return cfg.env.replace(reward=reward, llm_weight=method == "pirl")
+def env_config_for(name: str, cfg: RunConfig) -> VCPPConfig:
+    """The environment a PPO method trains on: its entry's reward weights (static for PPO-SR,
+    EWRI otherwise), and the LLM weight switched on for an advised method (PIRL)."""
+    entry = method_entry(name)
+    if entry.training != TRAIN_PPO:
+        raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
+    return cfg.env.replace(reward=entry.reward, llm_weight=entry.advised)
 
 
 # -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------
@@ -106,7 +106,8 @@ def check_resume(out: Path, method: str, cfg: RunConfig, seed: int, log: Any = p
     saved = resolved_config(method, RunConfig.from_yaml(cfg_path))
     wanted = resolved_config(method, cfg)
     old, new = _flat(saved.to_dict()), _flat(wanted.to_dict())
-    free = RESUME_MAY_CHANGE + (("il.",) if method == "pirl" else ("il.", "pare.", "advisor."))
+    unused = () if method_entry(method).advised else ("pare.", "advisor.")
+    free = RESUME_MAY_CHANGE + ("il.", *unused)
     for key in sorted(old.keys() | new.keys()):
         if key.startswith(free) or old.get(key) == new.get(key):
             continue
@@ -167,7 +168,7 @@ def build_env_stack(
     )
     pare = None
     inner = venv
-    if method == "pirl":
+    if method_entry(method).advised:
         from pirl.pare.wrapper import PAREVecEnv
 
         if advice is None:
@@ -452,7 +453,7 @@ def train(
             f"{cfg.train.total_steps:,} steps become {whole:,}"
         )
     advice = None
-    if method == "pirl":
+    if method_entry(method).advised:
         from pirl.agents.pirl_advice import build_pirl_advice
 
         # Before the folder exists: a dead server or a wrong student leaves nothing behind.
@@ -463,7 +464,7 @@ def train(
     torch.set_num_threads(cfg.ppo.torch_threads)
     meta = {
         "method": method,
-        "label": advice.label if advice is not None else LABELS.get(method, method),
+        "label": advice.label if advice is not None else label(method),
         "seed": seed,
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
