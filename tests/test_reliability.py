@@ -22,10 +22,11 @@ import yaml
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import load_model
-from pirl.agents.train import Progress, train
+from pirl.agents.train import train
 from pirl.evaluate import runner
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
 from pirl.evaluate.summary import read_summary
+from pirl.progress import Progress
 from pirl.world.config import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -330,9 +331,9 @@ def test_physics_section_round_trips_and_is_validated(tmp_path):
 
 
 def test_progress_prints_one_line_per_interval_and_one_final_line(capsys):
-    progress = Progress(100, "ppo-sr", every_s=3600)
+    progress = Progress("ppo-sr", 100, every_s=3600, rate_unit="fps")
     for steps in range(4, 200, 4):  # the vector steps of the last rollout run past the total
-        progress.update(steps, 0.5, None)
+        progress.update(steps, info="VCR(recent) 0.50")
     progress.close()
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 1 and lines[0].startswith("[ppo-sr] 196/100 steps")

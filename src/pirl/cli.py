@@ -216,7 +216,7 @@ def reproduce(
             _StopWorkersOnCtrlC(),
             Progress(console=console, transient=True) as bar,
         ):
-            progress = _EpisodeProgress(bar, "evaluation")
+            progress = _episode_progress(bar, "evaluation")
             report = run_reproduce(
                 cfg,
                 out,
@@ -415,7 +415,7 @@ def evaluate(
                 out, _split_paths(runs or []), _split_words(methods or []),
                 _split_words(sizes or ["30", "45", "60"]), episodes, _split_words(sim or ["grid"]),
                 workers, _preset(config, "--config") if config is not None else None, advisor,
-                act, overwrite, progress=_EpisodeProgress(bar, "episodes"),
+                act, overwrite, progress=_episode_progress(bar, "episodes"),
                 ray_address=ray_address,
             )  # fmt: skip
     except KeyboardInterrupt:
@@ -434,24 +434,14 @@ def _mean_ci(mean: float, half: float) -> str:
     return f"{mean:.3f}" if math.isnan(half) else f"{mean:.3f} ± {half:.3f}"
 
 
-class _EpisodeProgress:
-    """Evaluation progress: a bar on a terminal; off one, a plain line every ``every_s``
-    seconds and a final one."""
+def _episode_progress(bar: Any, label: str) -> Any:
+    """Evaluation progress on the command's bar (a plain line every 10 s off a terminal)."""
+    from pirl.progress import Progress
 
-    def __init__(self, bar: Any, label: str, every_s: float = 10.0) -> None:
-        import time
-
-        self.bar, self.label, self.every_s = bar, label, every_s
-        self.task = bar.add_task(label, total=None, visible=False)
-        self.clock = time.perf_counter
-        self.last = self.clock()
-
-    def __call__(self, done: int, total: int) -> None:
-        self.bar.update(self.task, completed=done, total=total, visible=True)
-        now = self.clock()
-        if not console.is_terminal and (done >= total or now - self.last >= self.every_s):
-            self.last = now
-            console.print(f"{self.label}: {done}/{total} episodes", highlight=False)
+    return Progress(
+        label, line="{label}: {done}/{total} episodes", bar=bar, tty=console.is_terminal,
+        final_at_total=True, out=lambda text: console.print(text, highlight=False),
+    )  # fmt: skip
 
 
 def _split_words(values: list[str]) -> list[str]:

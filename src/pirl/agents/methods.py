@@ -48,6 +48,9 @@ class Method:
     """The file of a finished run that holds the policy."""
     paper: bool = True
     """A method of the paper's tables (the others come after them in reports)."""
+    asks: bool = False
+    """Played by asking an advisor at every step (LLM-only): it takes ``--advisor``, plays
+    ``reproduce.llm_only_episodes`` scenarios and its calls are counted."""
 
     def folder(self, seed: int) -> str:
         """The run folder of this method and seed in ``pirl reproduce``'s ``runs/``."""
@@ -63,7 +66,7 @@ METHODS: dict[str, Method] = {
     for m in (
         Method("ppo-sr", "PPO-SR", reward="static"),
         Method("ppo-ewri", "PPO-EWRI"),
-        Method("llm-only", "LLM-only", training=PLAYED),
+        Method("llm-only", "LLM-only", training=PLAYED, asks=True),
         Method("il", "IL", training=TRAIN_IMITATION, expert="ppo-ewri", artifact="tabnet.zip"),
         Method("pirl", "PIRL", advised=True),
         Method("boustrophedon", "boustrophedon (planner)", training=PLAYED, paper=False),
@@ -99,6 +102,12 @@ def trained_method(name: str, what: str = "method") -> Method:
     if found is None or found.training == PLAYED:
         raise ConfigError(f"{what}: {name!r} is not trained ({', '.join(TRAINED)})")
     return found
+
+
+def asks(name: str) -> bool:
+    """Whether method ``name`` plays by asking an advisor (an unknown name does not)."""
+    found = METHODS.get(str(name))
+    return found is not None and found.asks
 
 
 def label(name: str) -> str:
@@ -149,6 +158,7 @@ __all__ = [
     "TRAINED",
     "Method",
     "advised_key",
+    "asks",
     "is_advised_key",
     "label",
     "method",

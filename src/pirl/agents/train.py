@@ -18,7 +18,6 @@ import csv
 import json
 import os
 import sys
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -43,6 +42,7 @@ from pirl.agents.run_folder import (
 )
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.wrapper import AdvisorFailing
+from pirl.progress import Progress
 from pirl.world.config import REWARD_TERMS, ConfigError, VCPPConfig
 
 EPISODE_COLUMNS = (
@@ -289,7 +289,9 @@ class RunCallback(BaseCallback):
             self.csv_rows += 1
             self._episodes.append(m)
             self._recent_vcr = (self._recent_vcr + [m["vcr"]])[-50:]
-        self.progress.update(self.num_timesteps, self.recent_vcr(), self.advisor_calls())
+        vcr, calls = self.recent_vcr(), self.advisor_calls()
+        info = [f"VCR(recent) {vcr:.2f}"] if vcr is not None else []
+        self.progress.update(self.num_timesteps, info="  ".join(info + ([calls] if calls else [])))
         return True
 
     def _on_rollout_end(self) -> None:
@@ -344,70 +346,6 @@ def whole_steps(cfg: RunConfig, steps: int) -> int:
     """``steps`` rounded up to whole rollouts (n_envs x n_steps): the steps PPO really runs."""
     rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
     return -(-steps // rollout) * rollout
-
-
-class Progress:
-    """A live bar on a terminal, plain log lines otherwise."""
-
-    def __init__(self, total: int, label: str, every_s: float, enabled: bool = True) -> None:
-        self.total, self.label, self.every_s, self.enabled = total, label, every_s, enabled
-        self.tty = enabled and sys.stderr.isatty()
-        self.start = time.perf_counter()
-        self.first: int | None = None
-        self.first_t = self.start
-        self.last_log = self.start  # the first plain line comes every_s after the first step
-        self.steps = 0
-        self.info = ""
-        self._bar = None
-        if self.tty:
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                TextColumn,
-                TimeRemainingColumn,
-            )
-            from rich.progress import Progress as RichProgress
-
-            self._bar = RichProgress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.fields[info]}"),
-                TimeRemainingColumn(),
-                transient=False,
-            )
-            self._task = self._bar.add_task(label, total=total, info="")
-            self._bar.start()
-
-    def update(self, steps: int, vcr: float | None, calls: str | None) -> None:
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if self.first is None:  # steps of the first vector step (or of the resumed checkpoint)
-            self.first, self.first_t = steps, now
-            self.last_log = now  # start-up (compiling, loading) is not training time
-        fps = (steps - self.first) / max(1e-9, now - self.first_t)
-        info = f"{fps:,.0f} fps"
-        if vcr is not None:
-            info += f"  VCR(recent) {vcr:.2f}"
-        if calls is not None:
-            info += f"  {calls}"
-        self.steps, self.info = steps, info
-        if self._bar is not None:
-            self._bar.update(self._task, completed=min(steps, self.total), info=info)
-        elif now - self.last_log >= self.every_s:  # one plain line per interval
-            self.last_log = now
-            self._line()
-
-    def _line(self) -> None:
-        print(f"[{self.label}] {self.steps:,}/{self.total:,} steps  {self.info}", flush=True)
-
-    def close(self) -> None:
-        """Stop the bar, or print the one final plain line."""
-        if self._bar is not None:
-            self._bar.stop()
-        elif self.enabled and self.first is not None:
-            self._line()
 
 
 # -- the whole run ---------------------------------------------------------------------------
@@ -484,7 +422,9 @@ def train(
         checkpoint.restore(state, model, stack.env, stack.venv, stack.pare)
         csv_rows = state.get("csv_rows", 0)
     total = cfg.train.total_steps
-    progress = Progress(total, method, cfg.train.log_every_s, show_progress)
+    progress = Progress(
+        method, total, every_s=cfg.train.log_every_s, enabled=show_progress, rate_unit="fps"
+    )
     callback = RunCallback(out, stack, cfg, total, progress, csv_rows)
     remaining = max(0, total - model.num_timesteps)
     try:

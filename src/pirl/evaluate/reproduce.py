@@ -20,11 +20,11 @@ from typing import Any, NamedTuple
 
 from pirl import _quiet
 from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
-from pirl.advice.registry import advisor_kind
+from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import BUILTIN, check_act
-from pirl.agents.methods import trained_method
+from pirl.agents.methods import asks, trained_method
 from pirl.agents.runs import check_layouts, train_one
 from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
 from pirl.evaluate.runner import (
@@ -372,9 +372,9 @@ def describe_plan(
         rate = r["eval_eps_per_s"][30] * (30 * 30) / (size[0] * size[1])
         eval_s += learned * rp.episodes / rate
         for name in rp.builtins:
-            n = rp.llm_only_episodes if name == "llm-only" else rp.episodes
+            n = rp.llm_only_episodes if asks(name) else rp.episodes
             eval_s += n * (4.0 / rate)  # a planner plays episode by episode
-            if name == "llm-only":
+            if asks(name):
                 calls = rp.llm_only_max_calls or 200
                 eval_s += n * calls * r["llm_only_s_per_call"]
     physics_eps = (len(jobs) + len(rp.builtins)) * rp.physics_episodes  # headline act only
@@ -410,10 +410,8 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
     specs = [spec_for_run(r) for r in runs if r.name.endswith(f"-s{cfg.reproduce.seeds[0]}")]
     specs += [
         spec_for_builtin(name, advisor, cfg.reproduce.llm_only_max_calls)
-        if name == "llm-only"
-        else spec_for_builtin(name)
         for name in cfg.reproduce.builtins
-        if name in ("llm-only", "boustrophedon")
+        if name in ("llm-only", "boustrophedon")  # the random walk's animation shows nothing
     ]
     act = cfg.reproduce.headline_act
     gifs = {}
@@ -450,7 +448,7 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
 def reproduce(
     cfg: RunConfig,
     out: Path,
-    advisor: str = "local",
+    advisor: str = DEFAULT_ADVISOR,
     workers: int | None = None,
     log: Log = print,
     progress: Callable[[int, int], None] | None = None,
@@ -476,18 +474,14 @@ def reproduce(
     runs = train_all(cfg, out, advisor, log, show_progress, ray_address, train_workers)
     trained_s = time.perf_counter() - started
     specs = [spec_for_run(r) for r in runs]
-    for name in rp.builtins:
-        if name == "llm-only":
-            specs.append(spec_for_builtin("llm-only", advisor, rp.llm_only_max_calls))
-        else:
-            specs.append(spec_for_builtin(name))
+    specs += [spec_for_builtin(name, advisor, rp.llm_only_max_calls) for name in rp.builtins]
     plan = EvalPlan(
         specs=specs,
         sizes=[parse_size(s) for s in rp.sizes],
         episodes=rp.episodes,
         env=cfg.env,
         config=cfg,
-        episodes_per_method={"llm-only": rp.llm_only_episodes},
+        episodes_per_method={m: rp.llm_only_episodes for m in rp.builtins if asks(m)},
         sims=["grid", "physics"] if rp.physics_sizes else ["grid"],
         sim_sizes={"physics": [parse_size(x) for x in rp.physics_sizes]},
         sim_episodes={"physics": rp.physics_episodes},
@@ -556,7 +550,7 @@ def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
     if episodes.is_file():
         for line in episodes.open():
             record = json.loads(line)
-            if record["method"] == "llm-only":
+            if asks(record["method"]):
                 calls += int(record.get("llm_calls", 0))
     stats["llm-only evaluation calls"] = calls
     return stats

@@ -27,7 +27,7 @@ from pirl import _quiet
 from pirl.advice.registry import DEFAULT_ADVISOR, builtin_of_label, find_advisor_kind
 from pirl.agents.config import RunConfig
 from pirl.agents.loading import ACT_MODES, BUILTIN, check_act, model_file, run_meta
-from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, is_advised_key, label
+from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_advised_key, label
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import write_summary
 from pirl.world.config import ConfigError, VCPPConfig
@@ -100,7 +100,7 @@ def spec_for_builtin(name: str, advisor: str | None = None, max_calls: int = 0) 
     if name not in BUILTIN:
         raise ConfigError(f"method {name!r}: built-in methods are {', '.join(BUILTIN)}")
     text = label(name)
-    if name != "llm-only":
+    if not asks(name):
         return MethodSpec(name, text, name)
     advisor = advisor or DEFAULT_ADVISOR
     kind = find_advisor_kind(advisor)
@@ -508,7 +508,7 @@ def evaluate_runs(
         if not r.is_dir():
             raise ConfigError(f"--runs {r}: no such run folder")
     specs = [spec_for_run(r) for r in runs]
-    if "llm-only" in builtins:
+    if any(asks(m) for m in builtins):
         advisor_kind(advisor).check_key(cfg)
     specs += [spec_for_builtin(m, advisor) for m in builtins]
     size_list = [parse_size(s) for s in sizes]
