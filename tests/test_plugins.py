@@ -106,6 +106,21 @@ def test_a_bad_advisor_in_a_profile_is_refused_before_training(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+def test_train_run_refuses_before_it_makes_a_folder(tmp_path):
+    from pirl.agents.runs import train_run
+
+    out = tmp_path / "run"
+    with pytest.raises(ConfigError, match="--method il needs --expert"):
+        train_run("il", out, TEST_CFG, TEST_CFG)
+    with pytest.raises(ConfigError, match="--student needs --method pirl with pare.mode student"):
+        train_run("ppo-sr", out, TEST_CFG, TEST_CFG, student=tmp_path)
+    with pytest.raises(ConfigError, match="unknown advisor 'gpt9'"):
+        train_run("pirl", out, TEST_CFG, TEST_CFG, advisor="gpt9")
+    with pytest.raises(ConfigError, match="'random' is not trained"):
+        train_run("random", out, TEST_CFG, TEST_CFG)
+    assert not out.exists()
+
+
 def _install(plugin: Path, target: Path, scratch: Path) -> None:
     """pip-install a plugin folder into ``target`` offline (its build files go to a copy)."""
     source = scratch / plugin.name

@@ -339,6 +339,18 @@ def test_progress_prints_one_line_per_interval_and_one_final_line(capsys):
     assert len(lines) == 1 and lines[0].startswith("[ppo-sr] 196/100 steps")
 
 
+def test_progress_of_an_evaluation_says_its_total_when_it_is_reached():
+    lines: list[str] = []
+    progress = Progress(
+        "episodes", line="{label}: {done}/{total} episodes", every_s=3600, tty=False,
+        final_at_total=True, out=lines.append,
+    )  # fmt: skip
+    for done in (1, 2, 3, 3):
+        progress(done, 3)
+    progress.close()
+    assert lines == ["episodes: 3/3 episodes"]
+
+
 def test_small_cli_outputs(tmp_path):
     from pirl.advice.parser import parse_recommendation
     from pirl.advice.recommendation import FORMAT_EXAMPLE

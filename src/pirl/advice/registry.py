@@ -224,13 +224,6 @@ def advisor_kind(name: str) -> AdvisorKind:
     return kind
 
 
-def is_llm(name: str) -> bool:
-    """Whether the advisor ``name`` is an LLM (an unknown name counts as one: reports never
-    call an LLM "not an LLM" by mistake the other way round)."""
-    kind = find_advisor_kind(name)
-    return True if kind is None else kind.llm
-
-
 __all__ = [
     "BUILTIN",
     "DEFAULT_ADVISOR",
@@ -240,5 +233,4 @@ __all__ = [
     "advisor_names",
     "builtin_of_label",
     "find_advisor_kind",
-    "is_llm",
 ]

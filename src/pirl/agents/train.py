@@ -31,7 +31,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
 from pirl.agents.config import RunConfig
-from pirl.agents.methods import PPO_METHODS, TRAIN_PPO, label
+from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, label
 from pirl.agents.methods import method as method_entry
 from pirl.agents.run_folder import (
     git_commit,
@@ -54,8 +54,8 @@ EPISODE_COLUMNS = (
 def env_config_for(name: str, cfg: RunConfig) -> VCPPConfig:
     """The environment a PPO method trains on: its entry's reward weights (static for PPO-SR,
     EWRI otherwise), and the LLM weight switched on for an advised method (PIRL)."""
-    entry = method_entry(name)
-    if entry.training != TRAIN_PPO:
+    entry = METHODS.get(name)
+    if entry is None or entry.training != TRAIN_PPO:
         raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
     return cfg.env.replace(reward=entry.reward, llm_weight=entry.advised)
 
