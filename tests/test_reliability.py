@@ -21,12 +21,13 @@ import yaml
 
 from pirl.agents import checkpoint
 from pirl.agents.loading import load_model
-from pirl.agents.train import Progress, train
+from pirl.agents.train import train
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.evaluate import runner
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
 from pirl.evaluate.summary import read_summary
+from pirl.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
@@ -330,12 +331,24 @@ def test_physics_section_round_trips_and_is_validated(tmp_path):
 
 
 def test_progress_prints_one_line_per_interval_and_one_final_line(capsys):
-    progress = Progress(100, "ppo-sr", every_s=3600)
+    progress = Progress("ppo-sr", 100, every_s=3600, rate_unit="fps")
     for steps in range(4, 200, 4):  # the vector steps of the last rollout run past the total
-        progress.update(steps, 0.5, None)
+        progress.update(steps, info="VCR(recent) 0.50")
     progress.close()
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 1 and lines[0].startswith("[ppo-sr] 196/100 steps")
+
+
+def test_progress_of_an_evaluation_says_its_total_when_it_is_reached():
+    lines: list[str] = []
+    progress = Progress(
+        "episodes", line="{label}: {done}/{total} episodes", every_s=3600, tty=False,
+        final_at_total=True, out=lines.append,
+    )  # fmt: skip
+    for done in (1, 2, 3, 3):
+        progress(done, 3)
+    progress.close()
+    assert lines == ["episodes: 3/3 episodes"]
 
 
 def test_small_cli_outputs(tmp_path):

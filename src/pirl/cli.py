@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -13,7 +12,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from pirl.config.errors import ConfigError, UserError
+from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind, advisor_names
+from pirl.agents.methods import BUILTIN, TRAINED
+from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 
 app = typer.Typer(
@@ -109,20 +110,14 @@ class _StopWorkersOnCtrlC:
         signal.signal(signal.SIGINT, self._old)
 
 
-def _check_workers(workers: int | None) -> None:
-    if workers is not None and workers < 1:
-        raise ConfigError(f"--workers {workers}: must be >= 1")
+def _names(names: list[str] | tuple[str, ...]) -> str:
+    """``a, b or c``, for help texts."""
+    names = list(names)
+    return ", ".join(names[:-1]) + f" or {names[-1]}" if len(names) > 1 else "".join(names)
 
 
-def _check_layouts(env: VCPPConfig, sizes: list[tuple[int, int, int]]) -> None:
-    """Draw one scenario per size now: an impossible obstacle layout is refused before any
-    folder is made (not by a worker, after)."""
-    import numpy as np
-
-    from pirl.world.state import draw_scenario
-
-    for size in sizes:
-        draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
+ADVISORS = _names(advisor_names())
+"""The advisors --advisor takes: the built-ins and the installed plugins'."""
 
 
 def _env_config(config: Path | None, **overrides: Any) -> VCPPConfig:
@@ -187,7 +182,7 @@ def reproduce(
     ),
     advisor: Annotated[
         str | None,
-        typer.Option(help="PIRL's advisor: local, openai or oracle (default: the preset's)."),
+        typer.Option(help=f"PIRL's advisor: {ADVISORS} (default: the preset's)."),
     ] = None,
     seeds: Annotated[list[int] | None, typer.Option(help="Training seeds per method.")] = None,
     workers: Annotated[int | None, typer.Option(help="Evaluation worker processes.")] = None,
@@ -202,7 +197,10 @@ def reproduce(
     """Train every method not yet trained in --out, evaluate all of them, write the report."""
     from rich.progress import Progress
 
+    from pirl.agents.run_folder import folder_lock
+    from pirl.agents.train import TrainingInterrupted
     from pirl.config.run import RunConfig
+    from pirl.evaluate.reproduce import check_reproduce
     from pirl.evaluate.reproduce import reproduce as run_reproduce
 
     path = _preset(config, "--config") if config else _preset(profile)
@@ -210,14 +208,7 @@ def reproduce(
     if seeds:
         cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
     advisor = advisor or cfg.pare.advisor
-    _check_openai_key(cfg, advisor)
-    _check_workers(workers)
-    from pirl.agents.run_folder import folder_lock
-    from pirl.agents.train import TrainingInterrupted
-    from pirl.evaluate.scenarios import parse_size
-
-    rp = cfg.reproduce
-    _check_layouts(cfg.env, [cfg.env.size, *map(parse_size, rp.sizes + rp.physics_sizes)])
+    check_reproduce(cfg, advisor, workers)
     out = out or Path("results") / profile
     console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
     try:
@@ -226,7 +217,7 @@ def reproduce(
             _StopWorkersOnCtrlC(),
             Progress(console=console, transient=True) as bar,
         ):
-            progress = _EpisodeProgress(bar, "evaluation")
+            progress = _episode_progress(bar, "evaluation")
             report = run_reproduce(
                 cfg,
                 out,
@@ -270,21 +261,6 @@ def _preset(profile: str | Path, option: str = "--profile") -> Path:
     raise ConfigError(f"{option} {str(profile)!r}: no such file or bundled preset (try {known})")
 
 
-def _check_openai_key(cfg: Any, advisor: str) -> None:
-    """The openai advisor without its key: one line before anything is built or written."""
-    import os
-
-    a = cfg.advisor
-    # OPENAI_BASE_URL names a server as the openai SDK reads it; such a server may need no key.
-    server = a.openai_base_url or os.environ.get("OPENAI_BASE_URL")
-    if advisor == "openai" and not server and not os.environ.get(a.openai_api_key_env):
-        raise UserError(
-            f"the openai advisor needs an API key: set the {a.openai_api_key_env} environment "
-            "variable (or advisor.openai_base_url or OPENAI_BASE_URL for a server that needs "
-            "none)"
-        )
-
-
 @app.command()
 @_clean_errors
 def demo(
@@ -298,7 +274,7 @@ def demo(
 @app.command()
 @_clean_errors
 def train(
-    method: Annotated[str, typer.Option(help="pirl, ppo-sr, ppo-ewri or il.")],
+    method: Annotated[str, typer.Option(help=f"{_names(TRAINED)}.")],
     out: Annotated[Path, typer.Option(help="Run folder to create (or resume).")],
     config: Annotated[
         str | None,
@@ -314,7 +290,7 @@ def train(
         int | None, typer.Option(help="Training seed (default 0, or the resumed run's).")
     ] = None,
     advisor: Annotated[
-        str | None, typer.Option(help="pirl: local, openai or oracle (default: the config's).")
+        str | None, typer.Option(help=f"pirl: {ADVISORS} (default: the config's).")
     ] = None,
     expert: Annotated[Path | None, typer.Option(help="il: a finished ppo-ewri run.")] = None,
     resume: Annotated[bool, typer.Option(help="Continue the run in --out.")] = False,
@@ -324,37 +300,15 @@ def train(
     ] = None,
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
+    from pirl.agents.runs import train_run
     from pirl.agents.train import TrainingInterrupted, TrainingStopped
-    from pirl.agents.train import train as run_training
-    from pirl.config.run import RunConfig
 
-    own = out / "config.yaml"
-    if resume and config is None and own.is_file():
-        cfg = RunConfig.from_yaml(own)  # resume continues the run that is in the folder
-    else:
-        cfg = RunConfig.from_yaml(_preset(config or "quick", "--config"))
-    if seed is None:
-        seed = _run_seed(out) if resume else 0
-    if steps is not None:
-        cfg = cfg.with_overrides(train={"total_steps": steps})
-    if advisor is not None:
-        cfg = cfg.with_overrides(pare={"advisor": advisor})
-    if method == "pirl":
-        _check_openai_key(cfg, cfg.pare.advisor)
-    _check_layouts(cfg.env, [cfg.env.size])  # before the run folder is made
     try:
-        if method == "il":
-            from pirl.agents.imitation import train_il
-
-            if expert is None:
-                raise ConfigError("--method il needs --expert runs/<a finished ppo-ewri run>")
-            result = train_il(cfg, expert, out, seed=seed, resume=resume)
-        else:
-            if student is not None and (method != "pirl" or cfg.pare.mode != "student"):
-                raise ConfigError("--student needs --method pirl with pare.mode student")
-            result = run_training(
-                method, cfg, out, seed=seed, resume=resume, student=student if not resume else None
-            )
+        result = train_run(
+            method, out, _preset(config, "--config") if config else None, _preset("quick"),
+            steps=steps, seed=seed, advisor=advisor, expert=expert, resume=resume,
+            student=student,
+        )  # fmt: skip
     except TrainingInterrupted as stop:
         err.print(
             f"interrupted: checkpoint saved at {stop.checkpoint}; continue with --resume",
@@ -374,7 +328,7 @@ def train(
 @app.command()
 @_clean_errors
 def distill(
-    teacher: Annotated[str, typer.Option(help="The advisor to imitate: local, openai, oracle.")],
+    teacher: Annotated[str, typer.Option(help=f"The advisor to imitate: {ADVISORS}.")],
     out: Annotated[Path, typer.Option(help="Student folder to create, e.g. students/NAME.")],
     states: Annotated[int, typer.Option(help="States to ask the teacher about.")] = 2000,
     config: Annotated[
@@ -394,8 +348,7 @@ def distill(
     from pirl.config.run import RunConfig
 
     cfg = RunConfig.from_yaml(_preset(config, "--config"))
-    if teacher == "openai":
-        _check_openai_key(cfg, teacher)
+    advisor_kind(teacher).check_key(cfg)
     sources = _split_sources(policy or ["boustrophedon", "random"], ("boustrophedon", "random"))
     with Progress(console=console, transient=True) as bar:
         task = bar.add_task("teacher answers", total=states)
@@ -416,16 +369,6 @@ def distill(
     console.print(f"wrote {out / 'student.pt'}; train with --student {out}")
 
 
-def _run_seed(out: Path) -> int:
-    """The seed a run folder was trained with (0 when it records none)."""
-    import json
-
-    try:
-        return int(json.loads((out / "meta.json").read_text()).get("seed") or 0)
-    except (OSError, ValueError):
-        return 0
-
-
 @app.command()
 @_clean_errors
 def evaluate(
@@ -437,7 +380,7 @@ def evaluate(
         ),
     ] = None,
     methods: Annotated[
-        list[str] | None, typer.Option(help="Built-in methods: boustrophedon, llm-only, random.")
+        list[str] | None, typer.Option(help=f"Built-in methods: {', '.join(sorted(BUILTIN))}.")
     ] = None,
     sizes: Annotated[list[str] | None, typer.Option(help="30, 45, 60 or XxYxZ.")] = None,
     episodes: Annotated[int, typer.Option(help="Scenarios per size.")] = 100,
@@ -447,8 +390,8 @@ def evaluate(
     config: Annotated[
         Path | None, typer.Option(help="Preset whose env section defines the scenarios.")
     ] = None,
-    advisor: Annotated[str, typer.Option(help="Advisor of llm-only: local, openai, oracle.")] = (
-        "local"
+    advisor: Annotated[str, typer.Option(help=f"Advisor of llm-only: {ADVISORS}.")] = (
+        DEFAULT_ADVISOR
     ),
     act: Annotated[
         str,
@@ -465,63 +408,16 @@ def evaluate(
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
 
-    from pirl.agents.run_folder import folder_contents, folder_lock
-    from pirl.config.run import RunConfig
-    from pirl.evaluate.runner import EvalPlan, parse_acts, spec_for_builtin, spec_for_run
-    from pirl.evaluate.runner import evaluate as run_evaluation
-    from pirl.evaluate.scenarios import parse_size
+    from pirl.evaluate.runner import evaluate_runs
 
-    acts = parse_acts(act)
-    if episodes < 1:
-        raise ConfigError(f"--episodes {episodes}: must be >= 1")
-    _check_workers(workers)
-    if folder_contents(out) and not overwrite:
-        raise ConfigError(
-            f"--out {out} already holds results; pass --overwrite to replace them or choose "
-            "another --out"
-        )
-    run_list = _split_paths(runs or [])
-    if config is not None:
-        cfg = RunConfig.from_yaml(_preset(config, "--config"))
-    elif run_list and (run_list[0] / "config.yaml").is_file():
-        cfg = RunConfig.from_yaml(run_list[0] / "config.yaml")
-        # A run records the reward it trained with; the scenarios do not depend on it.
-        cfg = replace(cfg, env=cfg.env.replace(reward="static", llm_weight=False))
-    else:
-        cfg = RunConfig()
-    for r in run_list:
-        if not r.is_dir():
-            raise ConfigError(f"--runs {r}: no such run folder")
-    specs = [spec_for_run(r) for r in run_list]
-    builtins = _split_words(methods or [])
-    if "llm-only" in builtins:
-        _check_openai_key(cfg, advisor)
-    specs += [spec_for_builtin(m, advisor) for m in builtins]
-    size_list = [parse_size(s) for s in _split_words(sizes or ["30", "45", "60"])]
-    _check_layouts(cfg.env, size_list)
-    plan = EvalPlan(
-        specs=specs,
-        sizes=size_list,
-        episodes=episodes,
-        sims=_split_words(sim or ["grid"]),
-        env=cfg.env,
-        config=cfg,
-        acts=acts,
-    )
-    factory = None
-    if ray_address:
-        from pirl.evaluate.distributed import ray_executor
-
-        factory = functools.partial(ray_executor, ray_address)
     try:
-        with (
-            folder_lock(out),
-            _StopWorkersOnCtrlC(),
-            Progress(console=console, transient=True) as bar,
-        ):
-            summary = run_evaluation(
-                plan, out, workers, progress=_EpisodeProgress(bar, "episodes"),
-                executor_factory=factory,
+        with _StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
+            summary = evaluate_runs(
+                out, _split_paths(runs or []), _split_words(methods or []),
+                _split_words(sizes or ["30", "45", "60"]), episodes, _split_words(sim or ["grid"]),
+                workers, _preset(config, "--config") if config is not None else None, advisor,
+                act, overwrite, progress=_episode_progress(bar, "episodes"),
+                ray_address=ray_address,
             )  # fmt: skip
     except KeyboardInterrupt:
         raise _interrupted(
@@ -539,24 +435,14 @@ def _mean_ci(mean: float, half: float) -> str:
     return f"{mean:.3f}" if math.isnan(half) else f"{mean:.3f} ± {half:.3f}"
 
 
-class _EpisodeProgress:
-    """Evaluation progress: a bar on a terminal; off one, a plain line every ``every_s``
-    seconds and a final one."""
+def _episode_progress(bar: Any, label: str) -> Any:
+    """Evaluation progress on the command's bar (a plain line every 10 s off a terminal)."""
+    from pirl.progress import Progress
 
-    def __init__(self, bar: Any, label: str, every_s: float = 10.0) -> None:
-        import time
-
-        self.bar, self.label, self.every_s = bar, label, every_s
-        self.task = bar.add_task(label, total=None, visible=False)
-        self.clock = time.perf_counter
-        self.last = self.clock()
-
-    def __call__(self, done: int, total: int) -> None:
-        self.bar.update(self.task, completed=done, total=total, visible=True)
-        now = self.clock()
-        if not console.is_terminal and (done >= total or now - self.last >= self.every_s):
-            self.last = now
-            console.print(f"{self.label}: {done}/{total} episodes", highlight=False)
+    return Progress(
+        label, line="{label}: {done}/{total} episodes", bar=bar, tty=console.is_terminal,
+        final_at_total=True, out=lambda text: console.print(text, highlight=False),
+    )  # fmt: skip
 
 
 def _split_words(values: list[str]) -> list[str]:
@@ -612,7 +498,7 @@ def _summary_table(path: Path) -> Table:
 @app.command()
 @_clean_errors
 def advise(
-    advisor: Annotated[str, typer.Option(help="local, openai or oracle.")] = "local",
+    advisor: Annotated[str, typer.Option(help=f"{ADVISORS}.")] = DEFAULT_ADVISOR,
     size: SizeOpt = (15, 15, 3),
     seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
     config: Annotated[
@@ -623,45 +509,30 @@ def advise(
     cache: Annotated[bool, typer.Option(help="Use the persistent answer cache.")] = True,
 ) -> None:
     """Ask the advisor about one scenario's first state: the check to run first on a new LLM."""
-    import time
-
-    from pirl.advice.factory import make_advisor
-    from pirl.advice.state import advice_requests
+    from pirl.advice.health import check_advisor
     from pirl.config.run import RunConfig
-    from pirl.env import VCPPEnv
 
     cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    kind = advisor_kind(advisor)
     if base_url is None:
-        _check_openai_key(cfg, advisor)
+        kind.check_key(cfg)
     changes: dict[str, Any] = {}
-    if model is not None:
-        changes["openai_model" if advisor == "openai" else "local_model"] = model
+    if model is not None and kind.model_setting:
+        changes[kind.model_setting] = model
     if base_url is not None:
         changes["openai_base_url"] = base_url
     if changes:
         cfg = cfg.with_overrides(advisor=changes)
-    env = VCPPEnv(cfg.env.replace(size=tuple(size)))
-    env.reset(seed=seed)
-    start = time.perf_counter()
-    backend = make_advisor(advisor, cfg, cache=cache)
-    loaded = time.perf_counter() - start
-    prompts, views = advice_requests(env.world, [0], backend, cfg.pare.prompt_variant)
-    prompt = prompts[0]
-    console.rule("prompt")
-    console.print(prompt, markup=False, highlight=False)
-    from pirl.advice.health import advise_within, location
 
-    limit = cfg.advisor.probe_timeout_s
-    if backend.name == "openai":
-        console.print(f"asking {backend.label} at {location(backend)} (up to {limit:g} s)...")
-    answers = advise_within(backend, prompts, views, limit)
-    if answers is None:
-        raise UserError(
-            f"advisor {backend.label} ({location(backend)}) gave no answer within {limit:g} s "
-            "(advisor.probe_timeout_s); check that the server is serving"
-        )
-    answer = answers[0]
-    console.rule(f"answer from {backend.label}")
+    def show_prompt(prompt: str) -> None:
+        console.rule("prompt")
+        console.print(prompt, markup=False, highlight=False)
+
+    check = check_advisor(
+        cfg, advisor, tuple(size), seed, cache, show_prompt, log=lambda m: console.print(m)
+    )
+    answer, prompt, loaded = check.answer, check.prompt, check.setup_s
+    console.rule(f"answer from {check.label}")
     console.print(answer.text or "(no text)", markup=False, highlight=False)
     console.rule("result")
     rec = answer.recommendation
@@ -671,7 +542,6 @@ def advise(
     console.print(f"from cache:  {answer.from_cache}")
     if answer.error:
         console.print(f"[bold red]error:[/] {answer.error}")
-    backend.close()
     copied = _copies_format_example(rec, prompt)
     if copied:
         console.print(

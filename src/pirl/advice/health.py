@@ -8,10 +8,14 @@ scenario of the training world.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
+from urllib.parse import urlparse
 
 from pirl.advice.base import Advisor, Answer
+from pirl.advice.registry import find_advisor_kind
 from pirl.advice.state import advice_requests
 from pirl.config.errors import UserError
 from pirl.config.world import VCPPConfig
@@ -24,11 +28,17 @@ def backend_of(advisor: Any) -> Any:
     return advisor
 
 
+def default_server(advisor: Any) -> str:
+    """The server URL an advisor's registry entry names (empty: it answers in-process)."""
+    kind = find_advisor_kind(str(getattr(backend_of(advisor), "name", "")))
+    return kind.server if kind is not None else ""
+
+
 def location(advisor: Any) -> str:
     """The server URL an advisor asks, or its model (folder) when it runs here."""
     backend = backend_of(advisor)
-    if backend.name == "openai":
-        return str(getattr(backend, "base_url", None) or "https://api.openai.com/v1")
+    if default_server(backend):
+        return str(getattr(backend, "base_url", None) or default_server(backend))
     model_dir = getattr(backend, "model_dir", None)
     return str(model_dir) if model_dir else f"model {backend.model}"
 
@@ -37,8 +47,8 @@ def where(advisor: Any) -> str:
     """The server URL or model an advisor talks to, for error messages."""
     backend = backend_of(advisor)
     url = getattr(backend, "base_url", None)
-    if backend.name == "openai":
-        return f"model {backend.model} at {url or 'api.openai.com'}"
+    if default_server(backend):
+        return f"model {backend.model} at {url or urlparse(default_server(backend)).netloc}"
     if hasattr(backend, "model_dir"):
         return f"model {backend.model_dir}"
     return f"model {backend.model}"
@@ -89,7 +99,7 @@ def probe(
     env = VCPPEnv(env_cfg.replace(llm_weight=False))
     env.reset(seed=0)
     prompts, views = advice_requests(env.world, [0], backend, prompt_variant)
-    if log is not None and backend.name == "openai":  # a server: the one that may hang
+    if log is not None and default_server(backend):  # a server: the one that may hang
         log(f"probing {advisor.label} at {location(advisor)} (up to {timeout_s:g} s)...")
     try:
         answers = advise_within(backend, prompts, views, timeout_s)
@@ -114,4 +124,68 @@ def probe(
     return answer
 
 
-__all__ = ["advise_within", "backend_of", "location", "probe", "where"]
+@dataclass
+class AdviceCheck:
+    """What ``pirl advise`` shows: the prompt, the answer and how long set-up took."""
+
+    label: str
+    """The advisor's label (with its model)."""
+    prompt: str
+    """The prompt of the scenario's first state."""
+    answer: Answer
+    """The advisor's answer (from the cache when it held one)."""
+    setup_s: float
+    """Seconds to build the advisor (loading a model, connecting)."""
+
+
+def check_advisor(
+    cfg: Any,
+    name: str,
+    size: tuple[int, int, int],
+    seed: int = 0,
+    cache: bool = True,
+    show_prompt: Callable[[str], Any] | None = None,
+    log: Callable[[str], Any] | None = None,
+) -> AdviceCheck:
+    """Ask advisor ``name`` (cache in front when ``cache``) about the first state of scenario
+    ``seed`` of a ``size`` world: the check to run first on a new LLM.
+
+    ``show_prompt`` sees the prompt before the question is asked; ``log`` gets an "asking
+    ..." line for an advisor on a server. An advisor that gives no answer within
+    ``advisor.probe_timeout_s`` is a :class:`UserError` (one line).
+    """
+    from pirl.advice.factory import make_advisor
+    from pirl.env.vcpp_env import VCPPEnv
+
+    env = VCPPEnv(cfg.env.replace(size=tuple(size)))
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    advisor = make_advisor(name, cfg, cache=cache)
+    setup_s = time.perf_counter() - start
+    prompts, views = advice_requests(env.world, [0], advisor, cfg.pare.prompt_variant)
+    if show_prompt is not None:
+        show_prompt(prompts[0])
+    limit = cfg.advisor.probe_timeout_s
+    if log is not None and default_server(advisor):
+        log(f"asking {advisor.label} at {location(advisor)} (up to {limit:g} s)...")
+    answers = advise_within(advisor, prompts, views, limit)
+    if answers is None:
+        # Not closed: closing may wait for the call that hangs; the daemon thread ends with us.
+        raise UserError(
+            f"advisor {advisor.label} ({location(advisor)}) gave no answer within "
+            f"{limit:g} s (advisor.probe_timeout_s); check that the server is serving"
+        )
+    advisor.close()
+    return AdviceCheck(advisor.label, prompts[0], answers[0], setup_s)
+
+
+__all__ = [
+    "AdviceCheck",
+    "advise_within",
+    "backend_of",
+    "check_advisor",
+    "default_server",
+    "location",
+    "probe",
+    "where",
+]

@@ -44,7 +44,6 @@ class OracleAdvisor(Advisor):
     model = "geometric"
     label = ORACLE_LABEL
     wants_view = True
-    cacheable = False
 
     def settings_key(self) -> str:
         return "oracle-v1"

@@ -21,6 +21,7 @@ import torch
 import yaml
 from sb3_contrib import MaskablePPO
 
+from pirl.agents.methods import IL, PPO_METHODS
 from pirl.agents.run_folder import (
     git_commit,
     prepare_run_folder,
@@ -43,10 +44,10 @@ def load_expert(expert_run: Path) -> Any:
     if not expert_run.is_dir():
         raise UserError(f"--expert {expert_run}: no such run folder")
     method = run_meta(expert_run)["method"]
-    if method not in ("ppo-ewri", "ppo-sr", "pirl"):
+    if method not in PPO_METHODS:
         raise UserError(
             f"--expert {expert_run} is a {method} run, not a finished PPO run "
-            "(ppo-ewri, ppo-sr or pirl)"
+            f"({', '.join(PPO_METHODS)})"
         )
     return PPOPolicy(model_file(expert_run), method, masked=run_masked(expert_run)).model
 
@@ -83,9 +84,10 @@ def _check_resume(out: Path, seed: int) -> None:
         meta = json.loads(meta_path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise UserError(f"--resume: {meta_path} is damaged ({exc})") from None
-    if meta.get("method") != "il":
+    if meta.get("method") != IL.name:
         raise UserError(
-            f"--resume: {out} is a {meta.get('method')} run; this command asks for --method il"
+            f"--resume: {out} is a {meta.get('method')} run; this command asks for "
+            f"--method {IL.name}"
         )
     if meta.get("seed") != seed:
         raise UserError(
@@ -154,7 +156,7 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     write_json(
         out / "meta.json",
         {
-            "method": "il",
+            "method": IL.name,
             "seed": seed,
             "git_commit": git_commit(),
             "expert": str(expert),

@@ -9,20 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, method, trained_method
 from pirl.agents.policy import Policy, RandomPolicy
 from pirl.config.errors import ConfigError, UserError
-
-BUILTIN = ("boustrophedon", "random", "llm-only")
-LABELS = {
-    "pirl": "PIRL",
-    "ppo-sr": "PPO-SR",
-    "ppo-ewri": "PPO-EWRI",
-    "il": "IL",
-    "llm-only": "LLM-only",
-    "boustrophedon": "boustrophedon (planner)",
-    "random": "random",
-}
-
 
 ACT_MODES = ("stochastic", "greedy")
 # A salt so the action stream of a scenario differs from the stream that drew the scenario.
@@ -138,7 +127,7 @@ class PPOPolicy(LearnedPolicy):
             raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
         self.obs_size = int(self.model.observation_space.shape[0])
         self.name = name
-        self.label = LABELS.get(name, name)
+        self.label = label(name)
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         import torch
@@ -153,12 +142,10 @@ class PPOPolicy(LearnedPolicy):
 class TabNetPolicy(LearnedPolicy):
     """The imitation-learning TabNet classifier (greedy: its most likely action)."""
 
-    name = "il"
-    label = "IL"
-
-    def __init__(self, model_path: Path, masked: bool = False) -> None:
+    def __init__(self, model_path: Path, name: str, masked: bool = False) -> None:
         from pytorch_tabnet.tab_model import TabNetClassifier
 
+        self.name, self.label = name, label(name)
         self.masked = masked
         self.model = TabNetClassifier(device_name="cpu")
         try:
@@ -210,7 +197,7 @@ def run_method(run: Path) -> str:
 def model_file(run: Path) -> Path:
     """The model file of a finished run, checked to be a whole zip archive (cheap: no torch)."""
     run = Path(run)
-    path = run / ("tabnet.zip" if run_method(run) == "il" else "model.zip")
+    path = run / method(run_method(run)).artifact
     if not path.is_file():
         raise UserError(f"run {run} has no {path.name}; {_RETRAIN}")
     try:
@@ -255,12 +242,12 @@ def load_policy(
     run = Path(source)
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")
-    method = run_method(run)
+    name = run_method(run)
     model = model_file(run)
     masked = run_masked(run)
-    if method == "il":
-        return TabNetPolicy(model, masked).set_act(act)
-    return PPOPolicy(model, method, device, masked).set_act(act)
+    if trained_method(name, f"run {run}").training == TRAIN_IMITATION:
+        return TabNetPolicy(model, name, masked).set_act(act)
+    return PPOPolicy(model, name, device, masked).set_act(act)
 
 
 def load_model(path: Path, device: str = "cpu") -> Any:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pirl.advice.registry import find_advisor_kind
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 
@@ -89,10 +90,9 @@ def build_pirl_advice(
         if answer.recommendation is None:
             log(probe_warning(advisor.label, answer.text, cfg.pare.prompt_variant))
     label = pirl_label(cfg, advisor.label)
-    rate = cfg.pare.oracle_teacher_rate if advisor.name == "oracle" else cfg.pare.teacher_rate
-    batch = {"oracle": 256, "local": cfg.advisor.local_batch_size}.get(
-        advisor.name, 4 * cfg.advisor.openai_concurrency
-    )
+    kind = find_advisor_kind(advisor.name)  # an advisor handed in may be of no kind
+    rate = kind.teacher_rate(cfg) if kind else cfg.pare.teacher_rate
+    batch = kind.batch_size(cfg) if kind else 4 * cfg.advisor.openai_concurrency
     if cfg.pare.mode != "student":
         return PirlAdvice(advisor, None, None, rate, batch, label)
     student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed)

@@ -1,16 +1,43 @@
-"""One training run of a plan, by name: a method, its advisor and a seed.
+"""Training runs by name: ``pirl train``'s one run, and one run of a reproduction's plan.
 
-``pirl reproduce`` calls :func:`train_one` for each run in turn, and a Ray worker calls the
-same function (:mod:`pirl.evaluate.distributed`), so both train with the same arguments. It
-lives with training, below evaluation, so neither of those two modules imports the other.
+``pirl train`` calls :func:`train_run`; ``pirl reproduce`` calls :func:`train_one` for each run
+in turn, and a Ray worker calls the same function (:mod:`pirl.evaluate.distributed`), so all
+of them train with the same arguments. Both choose the trainer from the method's entry
+(:mod:`pirl.agents.methods`). It lives with training, below evaluation, so neither of those
+two modules imports the other.
 """
 
 from __future__ import annotations
 
+import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from pirl.advice.registry import advisor_kind
+from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
+from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
+from pirl.config.world import VCPPConfig
+
+
+def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]]) -> None:
+    """Draw one scenario per size now: an impossible obstacle layout is refused before any
+    folder is made (not by a worker, after)."""
+    import numpy as np
+
+    from pirl.world.state import draw_scenario
+
+    for size in sizes:
+        draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
+
+
+def run_seed(out: Path) -> int:
+    """The seed a run folder was trained with (0 when it records none)."""
+    try:
+        return int(json.loads((Path(out) / "meta.json").read_text()).get("seed") or 0)
+    except (OSError, ValueError):
+        return 0
 
 
 def train_one(
@@ -23,14 +50,16 @@ def train_one(
     show_progress: bool,
     pare: dict[str, Any] | None = None,
 ) -> None:
-    """Train (or resume) run folder ``run``: ``il`` from its ``ppo-ewri`` expert next to it,
-    any other method with PPO (``adv`` names PIRL's advisor; empty keeps the config's;
-    ``pare`` overrides PIRL's other PARE settings, e.g. ``{"lam_cam": 4.0}``)."""
+    """Train (or resume) run folder ``run`` of a reproduction: an imitation method from its
+    expert's run next to it, any other method with PPO (``adv`` names an advised method's
+    advisor; empty keeps the config's; ``pare`` overrides its other PARE settings, e.g.
+    ``{"lam_cam": 4.0}``)."""
     from pirl.agents.imitation import train_il
     from pirl.agents.train import train
 
-    if method == "il":
-        expert = run.parent / f"ppo-ewri-s{seed}"
+    entry = trained_method(method)
+    if entry.training == TRAIN_IMITATION:
+        expert = run.parent / entry.expert_folder(seed)
         train_il(cfg, expert, run, seed=seed, resume=run.exists())
     else:
         overrides = {**(pare or {}), **({"advisor": adv} if adv else {})}
@@ -38,4 +67,55 @@ def train_one(
         train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
 
 
-__all__ = ["train_one"]
+def train_run(
+    method: str,
+    out: Path,
+    config: Path | None,
+    default_config: Path,
+    steps: int | None = None,
+    seed: int | None = None,
+    advisor: str | None = None,
+    expert: Path | None = None,
+    resume: bool = False,
+    student: Path | None = None,
+) -> Path:
+    """``pirl train``: train (or resume) ``method`` into run folder ``out``; returns the model.
+
+    The config is the preset file ``config``; without one, a resumed run's own config.yaml,
+    else ``default_config``. ``seed`` defaults to 0, or to the resumed run's. ``steps`` and
+    ``advisor`` override ``train.total_steps`` and ``pare.advisor``. Everything that can be
+    refused (an unknown method or advisor, a missing key, an impossible layout, a missing
+    expert, a student without student mode) is refused before the run folder is made.
+    """
+    from pirl.agents.train import train
+
+    entry = trained_method(method, "--method")
+    own = Path(out) / "config.yaml"
+    if resume and config is None and own.is_file():
+        cfg = RunConfig.from_yaml(own)  # resume continues the run that is in the folder
+    else:
+        cfg = RunConfig.from_yaml(config or default_config)
+    if seed is None:
+        seed = run_seed(out) if resume else 0
+    if steps is not None:
+        cfg = cfg.with_overrides(train={"total_steps": steps})
+    if advisor is not None:
+        cfg = cfg.with_overrides(pare={"advisor": advisor})
+    if entry.advised:
+        advisor_kind(cfg.pare.advisor).check_key(cfg)
+    check_layouts(cfg.env, [cfg.env.size])
+    if entry.training == TRAIN_IMITATION:
+        from pirl.agents.imitation import train_il
+
+        if expert is None:
+            raise ConfigError(
+                f"--method {method} needs --expert runs/<a finished {entry.expert} run>"
+            )
+        return train_il(cfg, expert, out, seed=seed, resume=resume)
+    if student is not None and (not entry.advised or cfg.pare.mode != "student"):
+        advised = " or ".join(m.name for m in METHODS.values() if m.advised)
+        raise ConfigError(f"--student needs --method {advised} with pare.mode student")
+    return train(method, cfg, out, seed=seed, resume=resume, student=None if resume else student)
+
+
+__all__ = ["check_layouts", "run_seed", "train_one", "train_run"]

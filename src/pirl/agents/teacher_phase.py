@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from pirl.advice.registry import advisor_kind
 from pirl.config.run import RunConfig
 
 POLICY = "boustrophedon"
@@ -43,10 +44,10 @@ class TeacherPhase:
 
 
 def needs_head_start(cfg: RunConfig, pare: dict[str, Any]) -> bool:
-    """Whether a PIRL variant's teacher is slower than the oracle and the run learns from a
-    student (the only mode whose shaping waits for teacher answers to pile up)."""
+    """Whether a PIRL variant's teacher is an LLM (slower than the oracle) and the run learns
+    from a student (the only mode whose shaping waits for teacher answers to pile up)."""
     merged = cfg.with_overrides(pare=pare).pare
-    return merged.mode == "student" and merged.advisor != "oracle"
+    return merged.mode == "student" and advisor_kind(merged.advisor).llm
 
 
 def phase_of(cfg: RunConfig, pare: dict[str, Any]) -> TeacherPhase | None:

@@ -18,7 +18,6 @@ import csv
 import json
 import os
 import sys
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
-from pirl.agents.loading import LABELS
+from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, label
+from pirl.agents.methods import method as method_entry
 from pirl.agents.run_folder import (
     git_commit,
     prepare_run_folder,
@@ -44,22 +44,22 @@ from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.vec_env import VCPPVecEnv, make_vec_env
 from pirl.pare.stats import AdvisorFailing
+from pirl.progress import Progress
 
-PPO_METHODS = ("pirl", "ppo-sr", "ppo-ewri")
 EPISODE_COLUMNS = (
     "timesteps", "world", "vcr", "be", "rvc", "overlap", "steps", "collisions", "battery_left",
     "camera_share", "mean_footprint",
 )  # fmt: skip
 
 
-def env_config_for(method: str, cfg: RunConfig) -> VCPPConfig:
-    """The environment a method trains on: static weights for PPO-SR, EWRI otherwise, and the
-    LLM weight switched on for PIRL."""
-    if method not in PPO_METHODS:
-        raise ConfigError(f"method {method!r}: PPO methods are {', '.join(PPO_METHODS)}")
-    reward = "static" if method == "ppo-sr" else "ewri"
+def env_config_for(name: str, cfg: RunConfig) -> VCPPConfig:
+    """The environment a PPO method trains on: its entry's reward weights (static for PPO-SR,
+    EWRI otherwise), and the LLM weight switched on for an advised method (PIRL)."""
+    entry = METHODS.get(name)
+    if entry is None or entry.training != TRAIN_PPO:
+        raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
     return cfg.env.replace(
-        reward=reward, llm_weight=method == "pirl", start_camera=cfg.train.camera_start
+        reward=entry.reward, llm_weight=entry.advised, start_camera=cfg.train.camera_start
     )
 
 
@@ -109,7 +109,8 @@ def check_resume(out: Path, method: str, cfg: RunConfig, seed: int, log: Any = p
     saved = resolved_config(method, RunConfig.from_yaml(cfg_path))
     wanted = resolved_config(method, cfg)
     old, new = _flat(saved.to_dict()), _flat(wanted.to_dict())
-    free = RESUME_MAY_CHANGE + (("il.",) if method == "pirl" else ("il.", "pare.", "advisor."))
+    unused = () if method_entry(method).advised else ("pare.", "advisor.")
+    free = RESUME_MAY_CHANGE + ("il.", *unused)
     for key in sorted(old.keys() | new.keys()):
         if key.startswith(free) or old.get(key) == new.get(key):
             continue
@@ -170,7 +171,7 @@ def build_env_stack(
     )
     pare = None
     inner = venv
-    if method == "pirl":
+    if method_entry(method).advised:
         from pirl.pare.vec_env import PAREVecEnv
 
         if advice is None:
@@ -282,7 +283,9 @@ class RunCallback(BaseCallback):
             self.csv_rows += 1
             self._episodes.append(m)
             self._recent_vcr = (self._recent_vcr + [m["vcr"]])[-50:]
-        self.progress.update(self.num_timesteps, self.recent_vcr(), self.advisor_calls())
+        vcr, calls = self.recent_vcr(), self.advisor_calls()
+        info = [f"VCR(recent) {vcr:.2f}"] if vcr is not None else []
+        self.progress.update(self.num_timesteps, info="  ".join(info + ([calls] if calls else [])))
         return True
 
     def _on_rollout_end(self) -> None:
@@ -339,70 +342,6 @@ def whole_steps(cfg: RunConfig, steps: int) -> int:
     return -(-steps // rollout) * rollout
 
 
-class Progress:
-    """A live bar on a terminal, plain log lines otherwise."""
-
-    def __init__(self, total: int, label: str, every_s: float, enabled: bool = True) -> None:
-        self.total, self.label, self.every_s, self.enabled = total, label, every_s, enabled
-        self.tty = enabled and sys.stderr.isatty()
-        self.start = time.perf_counter()
-        self.first: int | None = None
-        self.first_t = self.start
-        self.last_log = self.start  # the first plain line comes every_s after the first step
-        self.steps = 0
-        self.info = ""
-        self._bar = None
-        if self.tty:
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                TextColumn,
-                TimeRemainingColumn,
-            )
-            from rich.progress import Progress as RichProgress
-
-            self._bar = RichProgress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.fields[info]}"),
-                TimeRemainingColumn(),
-                transient=False,
-            )
-            self._task = self._bar.add_task(label, total=total, info="")
-            self._bar.start()
-
-    def update(self, steps: int, vcr: float | None, calls: str | None) -> None:
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if self.first is None:  # steps of the first vector step (or of the resumed checkpoint)
-            self.first, self.first_t = steps, now
-            self.last_log = now  # start-up (compiling, loading) is not training time
-        fps = (steps - self.first) / max(1e-9, now - self.first_t)
-        info = f"{fps:,.0f} fps"
-        if vcr is not None:
-            info += f"  VCR(recent) {vcr:.2f}"
-        if calls is not None:
-            info += f"  {calls}"
-        self.steps, self.info = steps, info
-        if self._bar is not None:
-            self._bar.update(self._task, completed=min(steps, self.total), info=info)
-        elif now - self.last_log >= self.every_s:  # one plain line per interval
-            self.last_log = now
-            self._line()
-
-    def _line(self) -> None:
-        print(f"[{self.label}] {self.steps:,}/{self.total:,} steps  {self.info}", flush=True)
-
-    def close(self) -> None:
-        """Stop the bar, or print the one final plain line."""
-        if self._bar is not None:
-            self._bar.stop()
-        elif self.enabled and self.first is not None:
-            self._line()
-
-
 # -- the whole run ---------------------------------------------------------------------------
 def train(
     method: str,
@@ -446,7 +385,7 @@ def train(
             f"{cfg.train.total_steps:,} steps become {whole:,}"
         )
     advice = None
-    if method == "pirl":
+    if method_entry(method).advised:
         from pirl.agents.pirl_advice import build_pirl_advice
 
         # Before the folder exists: a dead server or a wrong student leaves nothing behind.
@@ -457,7 +396,7 @@ def train(
     torch.set_num_threads(cfg.ppo.torch_threads)
     meta = {
         "method": method,
-        "label": advice.label if advice is not None else LABELS.get(method, method),
+        "label": advice.label if advice is not None else label(method),
         "seed": seed,
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
@@ -477,7 +416,9 @@ def train(
         checkpoint.restore(state, model, stack.env, stack.venv, stack.pare)
         csv_rows = state.get("csv_rows", 0)
     total = cfg.train.total_steps
-    progress = Progress(total, method, cfg.train.log_every_s, show_progress)
+    progress = Progress(
+        method, total, every_s=cfg.train.log_every_s, enabled=show_progress, rate_unit="fps"
+    )
     callback = RunCallback(out, stack, cfg, total, progress, csv_rows)
     remaining = max(0, total - model.num_timesteps)
     try:

@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from pirl.config.errors import ConfigError
 from pirl.config.load import Settings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
@@ -96,7 +95,8 @@ class PareSettings(Settings, section="pare"):
     """PIRL's reward shaping (DESIGN.md section 5)."""
 
     advisor: str = "local"
-    """'local' (embedded model), 'openai' (any OpenAI-compatible server) or 'oracle'."""
+    """'local' (embedded model), 'openai' (any OpenAI-compatible server), 'oracle' or an
+    installed plugin's name (pirl.advice.registry checks it when the advisor is built)."""
     mode: str = "student"
     """'student' (a distilled advisor answers every step; the teacher is asked at
     teacher_rate), 'sync' (the paper's timing: the answer about s_t shapes r_{t+1}) or 'async'
@@ -300,28 +300,12 @@ class RunConfig(Settings):
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
 
-    def validate(self) -> None:
-        """Each section checked itself; what is left are the names of plugged-in parts."""
-        _check_names(self)
-
     def with_overrides(self, **sections: dict[str, Any]) -> RunConfig:
         """A copy with some values changed, e.g. ``with_overrides(train={"total_steps": 10})``."""
         data = self.to_dict()
         for name, values in sections.items():
             data.setdefault(name, {}).update(values)
         return RunConfig.from_dict(data)
-
-
-def _check_names(cfg: RunConfig) -> None:
-    """The advisor name, checked against a list of names (kept apart from the section rules
-    so that a registry of advisors can take this check over whole)."""
-    pare = cfg.pare
-    choices = {
-        "pare.advisor": (pare.advisor, ("local", "openai", "oracle")),
-    }
-    for key, (value, allowed) in choices.items():
-        if value not in allowed:
-            raise ConfigError(f"{key}={value!r}: allowed values are {', '.join(allowed)}")
 
 
 __all__ = [

@@ -180,19 +180,23 @@ def train_on_ray(
     log: Callable[[str], None],
     workers: int | None = None,
 ) -> None:
-    """Run ``jobs`` in parallel on Ray; IL jobs start once their ``ppo-ewri`` run has finished.
+    """Run ``jobs`` in parallel on Ray; an imitation job (IL) starts once its expert's run
+    (PPO-EWRI) has finished.
 
     Every job runs to its end even when another fails (finished runs are kept, so a second
     reproduction resumes); then the first failure is raised.
     """
+    from pirl.agents.methods import trained_method
+
     if not jobs:
         return
     jobs = [job._replace(run=Path(job.run).resolve()) for job in jobs]
     with RayExecutor(address, workers) as pool:
         refs: dict[str, Any] = {}
         futures: dict[Future, TrainJob] = {}
-        for job in sorted(jobs, key=lambda j: j.method == "il"):
-            after = refs.get(f"ppo-ewri-s{job.seed}") if job.method == "il" else None
+        for job in sorted(jobs, key=lambda j: bool(trained_method(j.method).expert)):
+            entry = trained_method(job.method)  # an imitation run waits for its expert's
+            after = refs.get(entry.expert_folder(job.seed)) if entry.expert else None
             refs[job.name] = pool.submit_ref(
                 _train_job, job, cfg, *([after] if after is not None else [])
             )

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary
 
@@ -50,7 +51,6 @@ def _parse_paper(text: str) -> dict[str, dict[str, dict[str, tuple[float, float,
 
 
 PAPER = _parse_paper(_PAPER_TEXT)
-PAPER_METHODS = ("ppo-sr", "ppo-ewri", "llm-only", "il", "pirl")
 METRICS = ("vcr", "be", "rvc")
 HIGHER_IS_BETTER = {"vcr": True, "be": True, "rvc": False}
 SIM_TITLES = {"grid": "Table 1: grid simulator", "physics": "Table 2: physics simulator"}
@@ -261,8 +261,8 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
         if r.get("source"):
             sources.setdefault(r["method"], set()).add(str(r["source"]))
     labels = {m: honest_label(lab, sources.get(m, ())) for m, lab in labels.items()}
-    pirls = sorted({m for m, _, _ in groups if m.startswith("pirl")}, key=_method_order)
-    others = sorted({m for m, _, _ in groups if not m.startswith("pirl")}, key=_method_order)
+    pirls = sorted({m for m, _, _ in groups if is_advised_key(m)}, key=_method_order)
+    others = sorted({m for m, _, _ in groups if not is_advised_key(m)}, key=_method_order)
     keys = sorted(
         {(s, z) for _, s, z in groups}, key=lambda k: (k[0], [int(v) for v in k[1].split("x")])
     )
@@ -352,7 +352,7 @@ def summary_lines(
             f"{pirl} {' and '.join(parts)}: P(improvement) in VCR [95% interval] excludes 0.5."
         )
     if found and not verdicts:
-        seeds = sorted({int(r.get("seeds", 1)) for r in rows if r["method"].startswith("pirl")})
+        seeds = sorted({int(r.get("seeds", 1)) for r in rows if is_advised_key(r["method"])})
         why = "" if judged else " (one training run per row: no interval to judge)"
         lines.append(
             "No PIRL variant beats or loses to another method in VCR with a P(improvement) "
@@ -506,8 +506,7 @@ def learning_curves(runs: Sequence[Path], path: Path) -> Path:
 
 
 def _method_order(method: str) -> tuple[int, str]:
-    order = [*PAPER_METHODS, "pirl-oracle", "boustrophedon", "random"]
-    return (order.index(method) if method in order else len(order), method)
+    return report_order(method)
 
 
 def _data_uri(path: Path) -> str:

@@ -8,7 +8,6 @@ resume from their last checkpoint, so an interrupted reproduction picks up where
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
 import multiprocessing as mp
 import os
@@ -20,16 +19,23 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from pirl import _quiet
+from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
+from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind
 from pirl.agents import checkpoint
-from pirl.agents.loading import (
-    BUILTIN,
-    check_act,  # noqa: I001
-)
-from pirl.agents.runs import train_one
+from pirl.agents.loading import BUILTIN, check_act
+from pirl.agents.methods import asks, trained_method
+from pirl.agents.runs import check_layouts, train_one
 from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.evaluate.runner import EvalPlan, distinct_specs, evaluate, spec_for_builtin, spec_for_run
+from pirl.evaluate.runner import (
+    EvalPlan,
+    check_workers,
+    distinct_specs,
+    evaluate,
+    spec_for_builtin,
+    spec_for_run,
+)
 from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.evaluate.summary import honest_label
 
@@ -59,7 +65,8 @@ class PlannedRun(NamedTuple):
 def pirl_variants(cfg: RunConfig, advisor: str) -> list[dict[str, Any]]:
     """PARE overrides of each PIRL run per seed: ``reproduce.pirl_variants`` when given (a
     variant without ``advisor`` takes ``advisor``), else PIRL with ``advisor`` and, with
-    ``reproduce.oracle_pirl``, PIRL with the oracle beside it."""
+    ``reproduce.oracle_pirl``, PIRL with each built-in advisor that is not an LLM (the
+    oracle) beside it. Every advisor named must be a registered one."""
     rp = cfg.reproduce
     if rp.pirl_variants:
         variants = []
@@ -69,46 +76,49 @@ def pirl_variants(cfg: RunConfig, advisor: str) -> list[dict[str, Any]]:
             variants.append({"advisor": advisor, **v})
         for v in variants:  # an unknown key or a bad value is refused before any training
             cfg.with_overrides(pare=v)
+            advisor_kind(str(v["advisor"]))
         return variants
+    advisor_kind(advisor)
     variants = [{"advisor": advisor}]
-    if rp.oracle_pirl and advisor != "oracle":
-        variants.append({"advisor": "oracle"})
+    if rp.oracle_pirl:
+        variants += [{"advisor": k.name} for k in BUILTIN_ADVISORS.values()
+                     if not k.llm and k.name != advisor]  # fmt: skip
     return variants
 
 
-def _variant_name(variant: dict[str, Any]) -> str:
-    """``pirl-<advisor>`` plus the other overrides, e.g. ``pirl-oracle-lamcam4-lammove1``."""
+def _variant_name(method: str, variant: dict[str, Any]) -> str:
+    """``<method>-<advisor>`` plus the other overrides, e.g. ``pirl-oracle-lamcam4-lammove1``."""
     rest = "-".join(
         f"{k.replace('_', '')}{v}" for k, v in sorted(variant.items()) if k != "advisor"
     )
-    return "pirl-" + str(variant["advisor"]) + (f"-{rest}" if rest else "")
+    return f"{method}-" + str(variant["advisor"]) + (f"-{rest}" if rest else "")
 
 
 def plan_runs(cfg: RunConfig, advisor: str) -> list[PlannedRun]:
     """Every run of the profile, per seed in the order methods are listed."""
     rp = cfg.reproduce
-    for method in rp.methods:
-        if method not in ("ppo-sr", "ppo-ewri", "pirl", "il"):
+    entries = [trained_method(m, "reproduce.methods") for m in rp.methods]
+    for entry in entries:
+        if entry.expert and entry.expert not in rp.methods:
             raise ConfigError(
-                f"reproduce.methods: {method!r} is not trained (ppo-sr, ppo-ewri, pirl, il)"
+                f"reproduce.methods: {entry.name} learns from {entry.expert}; list "
+                f"{entry.expert} too"
             )
-    if "il" in rp.methods and "ppo-ewri" not in rp.methods:
-        raise ConfigError("reproduce.methods: il learns from ppo-ewri; list ppo-ewri too")
     for act in rp.acts:
         check_act(act)
     if rp.headline_act not in rp.acts:
         raise ConfigError(f"reproduce.headline_act {rp.headline_act!r} is not in acts")
-    variants = pirl_variants(cfg, advisor) if "pirl" in rp.methods else []
+    variants = pirl_variants(cfg, advisor) if any(e.advised for e in entries) else []
     plan = []
     for seed in rp.seeds:
-        for method in rp.methods:
-            if method == "pirl":
+        for entry in entries:
+            if entry.advised:
                 for v in variants:
-                    name = f"{_variant_name(v)}-s{seed}"
-                    plan.append(PlannedRun(name, "pirl", str(v["advisor"]), seed,
+                    name = f"{_variant_name(entry.name, v)}-s{seed}"
+                    plan.append(PlannedRun(name, entry.name, str(v["advisor"]), seed,
                                            tuple(sorted(v.items()))))  # fmt: skip
             else:
-                plan.append(PlannedRun(f"{method}-s{seed}", method, "", seed))
+                plan.append(PlannedRun(entry.folder(seed), entry.name, "", seed))
     return plan
 
 
@@ -149,6 +159,12 @@ def _train_job(job: PlannedRun, cfg_dict: dict[str, Any], run: str, resume: bool
     return time.perf_counter() - start
 
 
+def _expert(job: PlannedRun) -> str:
+    """The run folder an imitation job waits for (its expert's), or empty."""
+    entry = trained_method(job.method)
+    return entry.expert_folder(job.seed) if entry.expert else ""
+
+
 TEACHER = "teacher"
 """The method name of a teacher phase among the training jobs (it has no run folder)."""
 
@@ -157,7 +173,7 @@ def teacher_phases(cfg: RunConfig, jobs: list[PlannedRun]) -> dict[str, TeacherP
     """The teacher phase each PIRL job waits for (by job name); one phase per teacher."""
     out = {}
     for job in jobs:
-        if job.method == "pirl":
+        if trained_method(job.method).advised:
             phase = phase_of(cfg, dict(job.pare))
             if phase is not None:
                 out[job.name] = phase
@@ -224,7 +240,7 @@ def train_all(
     if workers == 1:
         for phase in {p.name: p for p in phases.values()}.values():
             _log_phase(phase, run_teacher_phase(cfg, phase), log)
-        for job, run, resume in sorted(todo, key=lambda t: t[0].method == "il"):
+        for job, run, resume in sorted(todo, key=lambda t: bool(_expert(t[0]))):
             start = time.perf_counter()
             train_one(job.method, job.advisor, job.seed, cfg, run, resume, show_progress,
                       dict(job.pare))  # fmt: skip
@@ -246,8 +262,7 @@ def _train_parallel(
     even when another fails (finished runs are kept); then the first failure is raised."""
     cfg_dict = cfg.to_dict()
     phases = phases or {}
-    needs: dict[str, str] = {t[0].name: f"ppo-ewri-s{t[0].seed}" for t in todo
-                             if t[0].method == "il"}  # fmt: skip
+    needs: dict[str, str] = {t[0].name: _expert(t[0]) for t in todo if _expert(t[0])}
     needs.update({name: phase.name for name, phase in phases.items()})
     ready = [(j, Path(j.name), False) for j in _phase_jobs(phases)]
     ready += [t for t in todo if t[0].name not in needs]
@@ -301,18 +316,14 @@ def _train_parallel(
 # evaluation at 30x30x3 (145 episodes/s, benchmarks/eval_throughput.py; other sizes scale
 # with the area). Estimated, not measured here: an IL run, a physics episode (PyFlyt), one
 # embedded-LLM answer for LLM-only, one batch of answers in sync PARE (docs/deviations.md).
+# An advised run's cost against PPO, a sync batch's seconds and a teacher phase's answers per
+# second are per advisor: its entry in pirl.advice.registry holds them.
 RATES: dict[str, Any] = {
     "ppo_steps_per_s": 5000.0,
-    # student mode; issue 18's demo: oracle 60 s, embedded LLM 127 s beside PPO's 45 s
-    "pirl_cost": {"oracle": 1.3, "local": 2.8, "openai": 2.8},
-    "local_batch_s": 20.0,  # sync/async PARE: one batch of answers from the embedded LLM
     "il_s": 60.0,
     "eval_eps_per_s": {30: 145.0},
     "physics_s_per_episode": 30.0,
     "llm_only_s_per_call": 1.0,
-    # A teacher phase: the embedded model with prefix reuse, batches of 16, beside one PPO
-    # worker (benchmarks/advice_throughput.py --prefix-reuse); a server: one answer a second.
-    "teacher_answers_per_s": {"local": 1.2, "openai": 1.0},  # demo: 160 answers in 94 s
 }
 
 
@@ -327,22 +338,25 @@ def describe_plan(
     todo = [j for j in jobs if _run_state(Path(out) / "runs" / j.name) != "complete"]
     ppo_s = 0.0
     for j in todo:
-        if j.method == "il":
+        entry = trained_method(j.method)
+        if entry.expert:
             ppo_s += r["il_s"]
-        elif j.method != "pirl":
+        elif not entry.advised:
             ppo_s += cfg.train.total_steps / r["ppo_steps_per_s"]
         else:
             pare = cfg.with_overrides(pare=dict(j.pare)).pare
-            ppo_s += cfg.train.total_steps * r["pirl_cost"][j.advisor] / r["ppo_steps_per_s"]
-            if pare.mode != "student" and j.advisor == "local":  # every K steps an answer
-                batches = cfg.train.total_steps / pare.query_every / cfg.advisor.local_batch_size
-                ppo_s += batches * r["local_batch_s"]
+            kind = advisor_kind(j.advisor)
+            ppo_s += cfg.train.total_steps * kind.train_cost / r["ppo_steps_per_s"]
+            if pare.mode != "student" and kind.sync_batch_s:  # every K steps an answer
+                batches = cfg.train.total_steps / pare.query_every / kind.batch_size(cfg)
+                ppo_s += batches * kind.sync_batch_s
     phases = {p.name: p for p in teacher_phases(cfg, todo).values()}
     phase_lines = []
     for phase in phases.values():
-        seconds = phase.answers / r["teacher_answers_per_s"].get(phase.advisor, 1.0)
+        seconds = phase.answers / advisor_kind(phase.advisor).answers_per_s
         ppo_s += seconds  # it takes a worker while PPO-SR and PPO-EWRI train
-        waiting = sum(1 for j in todo if j.method == "pirl" and phase_of(cfg, dict(j.pare)))
+        waiting = sum(1 for j in todo if trained_method(j.method).advised
+                      and phase_of(cfg, dict(j.pare)))  # fmt: skip
         phase_lines.append(
             f"plan: teacher phase {phase.name}: the {phase.advisor} teacher answers "
             f"{phase.answers} planner states into the shared teacher dataset (answers already "
@@ -358,9 +372,9 @@ def describe_plan(
         rate = r["eval_eps_per_s"][30] * (30 * 30) / (size[0] * size[1])
         eval_s += learned * rp.episodes / rate
         for name in rp.builtins:
-            n = rp.llm_only_episodes if name == "llm-only" else rp.episodes
+            n = rp.llm_only_episodes if asks(name) else rp.episodes
             eval_s += n * (4.0 / rate)  # a planner plays episode by episode
-            if name == "llm-only":
+            if asks(name):
                 calls = rp.llm_only_max_calls or 200
                 eval_s += n * calls * r["llm_only_s_per_call"]
     physics_eps = (len(jobs) + len(rp.builtins)) * rp.physics_episodes  # headline act only
@@ -396,10 +410,8 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
     specs = [spec_for_run(r) for r in runs if r.name.endswith(f"-s{cfg.reproduce.seeds[0]}")]
     specs += [
         spec_for_builtin(name, advisor, cfg.reproduce.llm_only_max_calls)
-        if name == "llm-only"
-        else spec_for_builtin(name)
         for name in cfg.reproduce.builtins
-        if name in ("llm-only", "boustrophedon")
+        if name in ("llm-only", "boustrophedon")  # the random walk's animation shows nothing
     ]
     act = cfg.reproduce.headline_act
     gifs = {}
@@ -422,10 +434,21 @@ def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) ->
     return gifs
 
 
+def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) -> None:
+    """Everything ``pirl reproduce`` refuses, refused before any folder is made: an unknown
+    advisor or one without its key, a bad worker count, an unknown method, advisor or act in
+    the profile, an impossible obstacle layout at any of its sizes."""
+    advisor_kind(advisor).check_key(cfg)
+    check_workers(workers)
+    plan_runs(cfg, advisor)
+    rp = cfg.reproduce
+    check_layouts(cfg.env, [cfg.env.size, *map(parse_size, rp.sizes + rp.physics_sizes)])
+
+
 def reproduce(
     cfg: RunConfig,
     out: Path,
-    advisor: str = "local",
+    advisor: str = DEFAULT_ADVISOR,
     workers: int | None = None,
     log: Log = print,
     progress: Callable[[int, int], None] | None = None,
@@ -441,8 +464,7 @@ def reproduce(
     from pirl.agents.run_folder import git_commit
     from pirl.evaluate.report import write_report
 
-    if advisor not in ("local", "openai", "oracle"):
-        raise ConfigError(f"--advisor {advisor!r}: allowed values are local, openai, oracle")
+    check_reproduce(cfg, advisor, workers)
     out = Path(out)
     rp = cfg.reproduce
     train_workers = workers or rp.train_workers or default_workers()
@@ -452,18 +474,14 @@ def reproduce(
     runs = train_all(cfg, out, advisor, log, show_progress, ray_address, train_workers)
     trained_s = time.perf_counter() - started
     specs = [spec_for_run(r) for r in runs]
-    for name in rp.builtins:
-        if name == "llm-only":
-            specs.append(spec_for_builtin("llm-only", advisor, rp.llm_only_max_calls))
-        else:
-            specs.append(spec_for_builtin(name))
+    specs += [spec_for_builtin(name, advisor, rp.llm_only_max_calls) for name in rp.builtins]
     plan = EvalPlan(
         specs=specs,
         sizes=[parse_size(s) for s in rp.sizes],
         episodes=rp.episodes,
         env=cfg.env,
         config=cfg,
-        episodes_per_method={"llm-only": rp.llm_only_episodes},
+        episodes_per_method={m: rp.llm_only_episodes for m in rp.builtins if asks(m)},
         sims=["grid", "physics"] if rp.physics_sizes else ["grid"],
         sim_sizes={"physics": [parse_size(x) for x in rp.physics_sizes]},
         sim_episodes={"physics": rp.physics_episodes},
@@ -471,13 +489,8 @@ def reproduce(
         sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
-    factory = None
-    if ray_address:
-        from pirl.evaluate.distributed import ray_executor
-
-        factory = functools.partial(ray_executor, ray_address)
     summary = evaluate(
-        plan, out / "eval", workers or rp.workers, progress=progress, executor_factory=factory
+        plan, out / "eval", workers or rp.workers, progress=progress, ray_address=ray_address
     )
     log("recording animations")
     gifs = record_gifs(cfg, runs, advisor, out / "report" / "gifs")
@@ -542,7 +555,7 @@ def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
     if episodes.is_file():
         for line in episodes.open():
             record = json.loads(line)
-            if record["method"] == "llm-only":
+            if asks(record["method"]):
                 calls += int(record.get("llm_calls", 0))
     stats["llm-only evaluation calls"] = calls
     return stats

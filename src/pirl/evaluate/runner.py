@@ -24,7 +24,9 @@ from pathlib import Path
 from typing import Any
 
 from pirl import _quiet
-from pirl.agents.loading import ACT_MODES, BUILTIN, LABELS, check_act, model_file, run_meta
+from pirl.advice.registry import DEFAULT_ADVISOR, builtin_of_label, find_advisor_kind
+from pirl.agents.loading import ACT_MODES, BUILTIN, check_act, model_file, run_meta
+from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_advised_key, label
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
@@ -57,41 +59,57 @@ class MethodSpec:
 
 def run_label(meta: dict[str, Any]) -> str:
     """A run's full label: ``meta["label"]`` when the run records one, else derived from its
-    method and advisor (the oracle is labelled as not an LLM)."""
+    method and advisor (an advisor that is not an LLM, the oracle, is labelled as such)."""
     if meta.get("label"):
         return str(meta["label"])
     method = str(meta["method"])
     advisor = str(meta.get("advisor") or "")
-    if method == "pirl" and "oracle" in advisor:
-        return "PIRL (oracle advisor, not an LLM)"
-    if method == "pirl" and advisor:
-        return f"PIRL ({advisor})"
-    return LABELS.get(method, method)
+    entry = METHODS.get(method)
+    if entry is not None and entry.advised and advisor:
+        kind = builtin_of_label(advisor)
+        if kind is not None and not kind.llm:
+            return f"{entry.label} ({kind.name} advisor, not an LLM)"
+        return f"{entry.label} ({advisor})"
+    return label(method)
 
 
 def spec_for_run(run: Path) -> MethodSpec:
-    """The spec of a finished run, labelled by :func:`run_label`; PIRL with the oracle has its
-    own key. Runs sharing a key but not a label are told apart by :func:`evaluate`."""
+    """The spec of a finished run, labelled by :func:`run_label`; an advised run whose advisor
+    is not an LLM (PIRL with the oracle) has its own key. Runs sharing a key but not a label
+    are told apart by :func:`evaluate`."""
     meta = run_meta(Path(run))
     model_file(Path(run))  # a missing or damaged model is reported here, before any work
     method = str(meta["method"])
-    label = run_label(meta)
-    key = "pirl-oracle" if method == "pirl" and "oracle" in label.lower() else method
-    return MethodSpec(key, label, str(run), meta.get("seed"), None)
+    entry = METHODS.get(method)
+    advised = entry is not None and entry.advised
+    key = advised_key(method, _run_advisor(Path(run))) if advised else method
+    return MethodSpec(key, run_label(meta), str(run), meta.get("seed"), None)
+
+
+def _run_advisor(run: Path) -> str:
+    """The advisor a run's config.yaml names (empty when it names none)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load((run / "config.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError):
+        return ""
+    return str((data.get("pare") or {}).get("advisor") or "")
 
 
 def spec_for_builtin(name: str, advisor: str | None = None, max_calls: int = 0) -> MethodSpec:
     if name not in BUILTIN:
         raise ConfigError(f"method {name!r}: built-in methods are {', '.join(BUILTIN)}")
-    label = LABELS[name]
-    if name != "llm-only":
-        return MethodSpec(name, label, name)
-    if name == "llm-only":
-        advisor = advisor or "local"
-        label = f"LLM-only ({advisor})" if advisor != "oracle" else "LLM-only (oracle, not an LLM)"
+    text = label(name)
+    if not asks(name):
+        return MethodSpec(name, text, name)
+    advisor = advisor or DEFAULT_ADVISOR
+    kind = find_advisor_kind(advisor)
+    llm = kind is None or kind.llm
+    text = f"{text} ({advisor})" if llm else f"{text} ({advisor}, not an LLM)"
     if max_calls:
-        label += f", at most {max_calls} calls per episode"
-    return MethodSpec(name, label, name, None, advisor, max_calls)
+        text += f", at most {max_calls} calls per episode"
+    return MethodSpec(name, text, name, None, advisor, max_calls)
 
 
 @dataclass
@@ -242,14 +260,30 @@ def _act_sims(plan: EvalPlan, spec: MethodSpec) -> list[tuple[str, str]]:
     return [(a, sim) for a in plan.acts for sim in plan.sims if a in plan.sim_acts.get(sim, [a])]
 
 
+def check_workers(workers: int | None) -> None:
+    """A worker count given by the user must be at least 1 (None: the default)."""
+    if workers is not None and workers < 1:
+        raise ConfigError(f"--workers {workers}: must be >= 1")
+
+
 def evaluate(
     plan: EvalPlan,
     out: Path,
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
     executor_factory: Callable[[int], Any] | None = None,
+    ray_address: str | None = None,
 ) -> Path:
-    """Run the plan; write ``episodes.jsonl`` and ``summary.csv`` into ``out``."""
+    """Run the plan; write ``episodes.jsonl`` and ``summary.csv`` into ``out``.
+
+    The episodes go to ``workers`` processes, or to an executor: ``executor_factory(workers)``,
+    or Ray at ``ray_address`` (``pirl[distributed]``)."""
+    if ray_address and executor_factory is None:
+        import functools
+
+        from pirl.evaluate.distributed import ray_executor
+
+        executor_factory = functools.partial(ray_executor, ray_address)
     for sim in plan.sims:
         if sim not in SIMS:
             raise ConfigError(f"--sim {sim!r}: available simulators are {', '.join(SIMS)}")
@@ -370,8 +404,9 @@ def _config_difference(a: Path, b: Path, method: str) -> tuple[str, Any, Any] | 
     sections the method does not use (PARE and the advisor outside PIRL) aside."""
     import yaml
 
-    unused = () if method.startswith("pirl") else ("pare.", "advisor.")
-    unused += ("train.",) if method == "il" else ("il.",)
+    entry = METHODS.get(method)
+    unused = () if is_advised_key(method) else ("pare.", "advisor.")
+    unused += ("train.",) if entry is not None and entry.training == TRAIN_IMITATION else ("il.",)
 
     def flat(run: Path) -> dict[str, Any]:
         path = run / "config.yaml"
@@ -422,3 +457,71 @@ def _write_jsonl(path: Path, records: Iterable[dict[str, Any]]) -> None:
         for record in records:
             fh.write(json.dumps(record, sort_keys=True) + "\n")
     os.replace(tmp, path)
+
+
+def evaluate_runs(
+    out: Path,
+    runs: list[Path],
+    builtins: list[str],
+    sizes: list[str],
+    episodes: int = 100,
+    sims: list[str] | None = None,
+    workers: int = 1,
+    config: Path | None = None,
+    advisor: str = DEFAULT_ADVISOR,
+    act: str | list[str] = "both",
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    ray_address: str | None = None,
+) -> Path:
+    """``pirl evaluate``: finished ``runs`` and ``builtins`` on the same scenarios of each of
+    ``sizes``; returns the summary written into ``out``.
+
+    The scenarios follow the env section of preset ``config``, else of the first run's
+    config.yaml, else the defaults. Everything that can be refused is refused before ``out``
+    is touched (it is locked while the episodes run): bad options, results already in
+    ``out`` without ``overwrite``, a missing run, an unknown advisor or its missing key (for
+    LLM-only), an impossible layout.
+    """
+    from pirl.advice.registry import advisor_kind
+    from pirl.agents.run_folder import folder_contents, folder_lock
+    from pirl.agents.runs import check_layouts
+    from pirl.evaluate.scenarios import parse_size
+
+    acts = parse_acts(act)
+    if episodes < 1:
+        raise ConfigError(f"--episodes {episodes}: must be >= 1")
+    check_workers(workers)
+    if folder_contents(out) and not overwrite:
+        raise ConfigError(
+            f"--out {out} already holds results; pass --overwrite to replace them or choose "
+            "another --out"
+        )
+    if config is not None:
+        cfg = RunConfig.from_yaml(config)
+    elif runs and (runs[0] / "config.yaml").is_file():
+        cfg = RunConfig.from_yaml(runs[0] / "config.yaml")
+        # A run records the reward it trained with; the scenarios do not depend on it.
+        cfg = replace(cfg, env=cfg.env.replace(reward="static", llm_weight=False))
+    else:
+        cfg = RunConfig()
+    for r in runs:
+        if not r.is_dir():
+            raise ConfigError(f"--runs {r}: no such run folder")
+    specs = [spec_for_run(r) for r in runs]
+    if any(asks(m) for m in builtins):
+        advisor_kind(advisor).check_key(cfg)
+    specs += [spec_for_builtin(m, advisor) for m in builtins]
+    size_list = [parse_size(s) for s in sizes]
+    check_layouts(cfg.env, size_list)
+    plan = EvalPlan(
+        specs=specs,
+        sizes=size_list,
+        episodes=episodes,
+        sims=list(sims or ["grid"]),
+        env=cfg.env,
+        config=cfg,
+        acts=acts,
+    )
+    with folder_lock(out):
+        return evaluate(plan, out, workers, progress=progress, ray_address=ray_address)
