@@ -116,7 +116,9 @@ def main() -> None:
             for size in sizes:
                 seeds = pick(size, args.episodes)
                 p_steps, p_vcr = planner[size]
-                env = trained_env.replace(size=size)
+                # Every evaluation starts at the paper's camera pose (a run that trained with
+                # exploring starts recorded start_camera: random before they left its env).
+                env = trained_env.replace(size=size, start_camera="fixed")
                 for act in ("stochastic", "greedy"):
                     per_seed_vcr, per_seed_steps, ratios, cams = [], [], [], []
                     for run in members:

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from pirl.agents.train import env_config_for
+from pirl.agents.train import env_config_for, train, training_env_config
 from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.world.state import draw_scenario
+
+TEST_CFG = Path(__file__).resolve().parents[1] / "configs" / "test.yaml"
 
 
 def test_fixed_start_draws_the_same_scenarios_as_before() -> None:
@@ -31,10 +35,14 @@ def test_random_start_covers_the_camera_grid() -> None:
     assert zooms == list(range(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1))
 
 
-def test_camera_start_reaches_the_training_env_only() -> None:
-    cfg = RunConfig.from_dict({"train": {"camera_start": "random"}})
-    assert env_config_for("ppo-ewri", cfg).start_camera == "random"
-    assert cfg.env.start_camera == "fixed"  # what every evaluation of the run builds on
+def test_camera_start_reaches_the_training_env_only(tmp_path) -> None:
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"camera_start": "random"})
+    assert training_env_config("ppo-ewri", cfg).start_camera == "random"
+    assert env_config_for("ppo-ewri", cfg).start_camera == "fixed"
+    # The run's config.yaml (what evaluations build their env from) keeps the fixed start.
+    train("ppo-ewri", cfg, tmp_path / "run", seed=0, show_progress=False)
+    saved = RunConfig.from_yaml(tmp_path / "run" / "config.yaml")
+    assert saved.train.camera_start == "random" and saved.env.start_camera == "fixed"
 
 
 def test_unknown_camera_start_is_one_line() -> None:

@@ -53,14 +53,19 @@ EPISODE_COLUMNS = (
 
 
 def env_config_for(name: str, cfg: RunConfig) -> VCPPConfig:
-    """The environment a PPO method trains on: its entry's reward weights (static for PPO-SR,
-    EWRI otherwise), and the LLM weight switched on for an advised method (PIRL)."""
+    """The environment a PPO method is trained and judged on: its entry's reward weights (static
+    for PPO-SR, EWRI otherwise), and the LLM weight switched on for an advised method (PIRL).
+    Its episodes start at the env's camera pose; see :func:`training_env_config`."""
     entry = METHODS.get(name)
     if entry is None or entry.training != TRAIN_PPO:
         raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
-    return cfg.env.replace(
-        reward=entry.reward, llm_weight=entry.advised, start_camera=cfg.train.camera_start
-    )
+    return cfg.env.replace(reward=entry.reward, llm_weight=entry.advised)
+
+
+def training_env_config(name: str, cfg: RunConfig) -> VCPPConfig:
+    """:func:`env_config_for` with ``train.camera_start`` applied: exploring starts are a way
+    of training, so they stay out of the env that config.yaml records and evaluations build."""
+    return env_config_for(name, cfg).replace(start_camera=cfg.train.camera_start)
 
 
 # -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------
@@ -167,7 +172,7 @@ def build_env_stack(
     """make_vec_env -> (PARE for pirl, from a :class:`~pirl.agents.pirl_advice.PirlAdvice`)
     -> VecMonitor."""
     venv = make_vec_env(
-        cfg.ppo.n_envs, seed=train_seed_base(seed), config=env_config_for(method, cfg)
+        cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env_config(method, cfg)
     )
     pare = None
     inner = venv

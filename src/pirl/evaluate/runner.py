@@ -200,7 +200,8 @@ def run_chunk(
         _quiet.import_quietly("pybullet")
     torch.set_num_threads(1)
     config = RunConfig.from_dict(config_dict)
-    env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size))
+    # Evaluation scenarios start at the env's camera pose, whatever a run trained from.
+    env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size), start_camera="fixed")
     policy = _policy(spec, config)
     if act != FIXED:
         policy.set_act(act)
