@@ -11,6 +11,7 @@ import numpy as np
 from numba.core.dispatcher import Dispatcher
 
 import pirl.env
+import pirl.pare
 import pirl.physics
 import pirl.world
 from pirl.env import VCPPEnv, VCPPVectorEnv, make_vec_env
@@ -23,7 +24,7 @@ SMALL = {"size": (8, 8, 3), "max_steps": 40, "scale_by_alpha": False, "battery_c
 
 def _kernels() -> dict[str, Dispatcher]:
     found = {}
-    for package in (pirl.world, pirl.env, pirl.physics):
+    for package in (pirl.world, pirl.env, pirl.pare, pirl.physics):
         names = [package.__name__] + [
             m.name for m in pkgutil.walk_packages(package.__path__, package.__name__ + ".")
         ]
