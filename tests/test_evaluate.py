@@ -224,4 +224,8 @@ def test_report_settings_line_says_masked_or_not():
     paper = settings_line(RunConfig.from_yaml(root / "paper.yaml"))
     assert "valid-action masks" in quick and "visit counts" in quick
     assert "no action masks" in paper and "the paper's observation" in paper
-    assert "random camera poses" in quick and "camera poses" not in paper
+    assert "camera poses" not in quick and "camera poses" not in paper  # fixed starts
+    starts = RunConfig.from_yaml(root / "quick.yaml").with_overrides(
+        train={"camera_start": "random"}
+    )
+    assert "random camera poses" in settings_line(starts)
