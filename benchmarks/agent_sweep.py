@@ -58,6 +58,11 @@ VARIANTS: dict[str, dict[str, dict]] = {
         "env": MEMORY,
         "train": {"camera_start": "random"},
     },
+    "masked-memory-mixed": {
+        "ppo": {"action_masking": True},
+        "env": MEMORY,
+        "train": {"camera_start": "mixed"},
+    },
 }
 
 

@@ -35,6 +35,13 @@ def test_random_start_covers_the_camera_grid() -> None:
     assert zooms == list(range(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1))
 
 
+def test_mixed_start_draws_half_its_scenarios_at_random_poses() -> None:
+    cfg = VCPPConfig(start_camera="mixed")
+    rng = np.random.default_rng(1)
+    drawn = sum(draw_scenario(cfg, rng).camera is not None for _ in range(400))
+    assert 160 < drawn < 240
+
+
 def test_camera_start_reaches_the_training_env_only(tmp_path) -> None:
     cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"camera_start": "random"})
     assert training_env_config("ppo-ewri", cfg).start_camera == "random"

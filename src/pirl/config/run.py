@@ -82,12 +82,13 @@ class TrainSettings(Settings, section="train"):
     camera_start: str = "fixed"
     """Training episodes start with the camera at the env's start pose ('fixed', the paper) or
     at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
-    wide footprints it would not find by chance). Evaluation always starts at the env's pose."""
+    wide footprints it would not find by chance) or, half the time each, both ('mixed').
+    Evaluation always starts at the env's pose."""
 
     def validate(self) -> None:
         """A positive length and checkpoint interval, a known camera start."""
         self.require_positive("total_steps", "checkpoint_every")
-        self.require_choice("camera_start", ("fixed", "random"))
+        self.require_choice("camera_start", ("fixed", "random", "mixed"))
 
 
 @dataclass(frozen=True)

@@ -113,7 +113,7 @@ class VCPPConfig(Settings, section="env"):
     start_camera: str = "fixed"
     """'fixed': every episode starts with the camera at start_tilt/pan/zoom (the paper). 'random':
     each scenario also draws its starting camera pose uniformly on the grid (exploring starts;
-    training only: ``train.camera_start``)."""
+    training only: ``train.camera_start``); 'mixed': half of the scenarios do."""
     reward: str = "static"
     """Reward weights: 'static' (PPO-SR) or 'ewri' (re-drawn at every reset)."""
     static_weights: tuple[float, ...] = STATIC_WEIGHTS
@@ -185,7 +185,7 @@ class VCPPConfig(Settings, section="env"):
         if self.start_pan % PAN_STEP or not PAN_MIN <= self.start_pan <= PAN_MAX:
             raise self.refuse("start_pan", "allowed values are -90, -75, ..., 90")
         zoom_to_tenths(self.start_zoom, self.where("start_zoom"))
-        self.require_choice("start_camera", ("fixed", "random"))
+        self.require_choice("start_camera", ("fixed", "random", "mixed"))
         if len(self.static_weights) != len(REWARD_TERMS):
             raise self.refuse(
                 "static_weights",

@@ -538,8 +538,9 @@ def settings_line(cfg: RunConfig) -> str:
         else "the paper's observation"
     )
     starts = (
-        "; training episodes start at random camera poses (evaluation at the paper's)"
-        if cfg.train.camera_start == "random"
+        f"; training episodes start at random camera poses ({cfg.train.camera_start}; "
+        "evaluation at the paper's)"
+        if cfg.train.camera_start != "fixed"
         else ""
     )
     return f"Agents: {masks}; {seen}{starts} (docs/deviations.md)."

@@ -163,7 +163,7 @@ class Scenario:
     start: tuple[int, int, int]
     wind_seed: int
     camera: tuple[int, int, int] | None = None
-    """Starting (tilt, pan, zoom tenths) if drawn (``start_camera: random``); else the config's."""
+    """Starting (tilt, pan, zoom tenths) if drawn (``start_camera``); else the config's."""
 
 
 @numba.njit(cache=True)
@@ -205,7 +205,8 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
             start = np.unravel_index(free[int(rng.integers(free.size))], cfg.size)
             wind_seed = int(rng.integers(0, 2**63 - 1))
             camera = None
-            if cfg.start_camera == "random":  # drawn last: fixed-start scenarios stay the same
+            # Drawn last, and only when asked: fixed-start scenarios stay the same.
+            if cfg.start_camera == "random" or (cfg.start_camera == "mixed" and rng.random() < 0.5):
                 camera = (
                     int(rng.choice(grid.tilt_steps())),
                     int(rng.choice(grid.pan_steps())),
