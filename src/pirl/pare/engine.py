@@ -79,12 +79,8 @@ class PARE:
             )
         if not env.cfg.llm_weight:
             raise ConfigError("PARE needs an environment made with llm_weight=True")
-        kind = SOURCES.get(settings.mode)
-        if kind is None:
-            allowed = ", ".join(SOURCES)
-            raise ConfigError(f"mode={settings.mode!r}: allowed values are {allowed}")
-        if settings.query_every < 1:
-            raise ConfigError(f"query_every={settings.query_every!r}: must be >= 1")
+        # The section checked its mode and query_every when it was built (pirl.config.run).
+        kind = SOURCES[settings.mode]
         board = AdviceBoard(env.num_envs)
         stats = PareStats(label=advice.label, mode=settings.mode)
         health = Health(advice.advisor, stats, settings.max_failure_rate, settings.failure_window)
