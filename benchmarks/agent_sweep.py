@@ -63,6 +63,22 @@ VARIANTS: dict[str, dict[str, dict]] = {
         "env": MEMORY,
         "train": {"camera_start": "mixed"},
     },
+    # Longer credit horizons, more exploration, a longer budget (PPO-EWRI's battery-bound runs).
+    "masked-memory-gamma995": {
+        "ppo": {"action_masking": True, "gamma": 0.995},
+        "env": MEMORY,
+        "train": FIXED,
+    },
+    "masked-memory-ent03": {
+        "ppo": {"action_masking": True, "ent_coef": 0.03},
+        "env": MEMORY,
+        "train": FIXED,
+    },
+    "masked-memory-long": {
+        "ppo": {"action_masking": True},
+        "env": MEMORY,
+        "train": {**FIXED, "total_steps": 819200},
+    },
 }
 
 
