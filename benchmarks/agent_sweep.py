@@ -79,6 +79,16 @@ VARIANTS: dict[str, dict[str, dict]] = {
         "env": MEMORY,
         "train": {**FIXED, "total_steps": 819200},
     },
+    "masked-memory-long3x": {
+        "ppo": {"action_masking": True},
+        "env": MEMORY,
+        "train": {**FIXED, "total_steps": 1228800},
+    },
+    "masked-memory-long4x": {
+        "ppo": {"action_masking": True},
+        "env": MEMORY,
+        "train": {**FIXED, "total_steps": 1638400},
+    },
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
     "masked-memory-train30": {
         "ppo": {"action_masking": True},
