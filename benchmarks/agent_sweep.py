@@ -89,6 +89,22 @@ VARIANTS: dict[str, dict[str, dict]] = {
         "env": MEMORY,
         "train": {**FIXED, "total_steps": 1638400},
     },
+    # More learning per step, for a fixed budget (the demo's): a larger step size, more epochs.
+    "masked-memory-lr6e4": {
+        "ppo": {"action_masking": True, "learning_rate": 0.0006},
+        "env": MEMORY,
+        "train": FIXED,
+    },
+    "masked-memory-lr1e3": {
+        "ppo": {"action_masking": True, "learning_rate": 0.001},
+        "env": MEMORY,
+        "train": FIXED,
+    },
+    "masked-memory-epochs8": {
+        "ppo": {"action_masking": True, "n_epochs": 8},
+        "env": MEMORY,
+        "train": FIXED,
+    },
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
     "masked-memory-train30": {
         "ppo": {"action_masking": True},
