@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.registry import advisor_kind
-from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
+from pirl.agents.methods import METHODS, TRAIN_IMITATION, TRAIN_PPO, trained_method
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
@@ -30,6 +30,27 @@ def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]]) -> Non
 
     for size in sizes:
         draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
+
+
+def method_steps(cfg: RunConfig, method: str) -> int:
+    """The steps ``method`` trains in ``cfg``: its ``train.steps_by_method`` entry, else
+    ``train.total_steps``. Every name there must be a method trained with PPO steps (one line
+    otherwise, before any folder is made)."""
+    for name in cfg.train.steps_by_method:
+        if trained_method(name, "train.steps_by_method").training != TRAIN_PPO:
+            raise ConfigError(
+                f"train.steps_by_method: {name} is not trained in PPO steps "
+                f"(its budget is in the il section)"
+            )
+    return cfg.train.steps_by_method.get(method, cfg.train.total_steps)
+
+
+def method_config(cfg: RunConfig, method: str) -> RunConfig:
+    """``cfg`` as ``method`` trains it: total_steps set to :func:`method_steps`."""
+    steps = method_steps(cfg, method)
+    return (
+        cfg if steps == cfg.train.total_steps else cfg.with_overrides(train={"total_steps": steps})
+    )
 
 
 def run_seed(out: Path) -> int:
@@ -63,7 +84,8 @@ def train_one(
         train_il(cfg, expert, run, seed=seed, resume=run.exists())
     else:
         overrides = {**(pare or {}), **({"advisor": adv} if adv else {})}
-        run_cfg = cfg.with_overrides(pare=overrides) if overrides else cfg
+        run_cfg = method_config(cfg, method)
+        run_cfg = run_cfg.with_overrides(pare=overrides) if overrides else run_cfg
         train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
 
 
@@ -83,7 +105,8 @@ def train_run(
 
     The config is the preset file ``config``; without one, a resumed run's own config.yaml,
     else ``default_config``. ``seed`` defaults to 0, or to the resumed run's. ``steps`` and
-    ``advisor`` override ``train.total_steps`` and ``pare.advisor``. Everything that can be
+    ``advisor`` override ``train.total_steps`` (after the method's own
+    ``train.steps_by_method`` entry) and ``pare.advisor``. Everything that can be
     refused (an unknown method or advisor, a missing key, an impossible layout, a missing
     expert, a student without student mode) is refused before the run folder is made.
     """
@@ -97,6 +120,7 @@ def train_run(
         cfg = RunConfig.from_yaml(config or default_config)
     if seed is None:
         seed = run_seed(out) if resume else 0
+    cfg = method_config(cfg, method)
     if steps is not None:
         cfg = cfg.with_overrides(train={"total_steps": steps})
     if advisor is not None:

@@ -207,6 +207,15 @@ def _settler(hint: Any) -> Callable[[Any], Any]:
             return tuple(each(v) for v in value)
 
         return many
+    if origin is dict:
+        key, item = _settler(args[0]), _settler(args[1])
+
+        def mapping(value: Any) -> Any:
+            if not isinstance(value, Mapping):
+                raise _Mismatch
+            return {key(k): item(v) for k, v in value.items()}
+
+        return mapping
     if origin is tuple:
         parts = [_settler(a) for a in args]
 
@@ -246,6 +255,9 @@ def _describe(hint: Any, plural: bool = False) -> str:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if origin in (types.UnionType, typing.Union):
         return " or ".join(_describe(a, plural) for a in args)
+    if origin is dict:
+        head = "mappings" if plural else "a mapping"
+        return f"{head} of {_describe(args[0], True)} to {_describe(args[1], True)}"
     if origin is tuple:
         head = "lists of" if plural else "a list of"
         if len(args) == 2 and args[1] is Ellipsis:

@@ -84,11 +84,18 @@ class TrainSettings(Settings, section="train"):
     at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
     wide footprints it would not find by chance) or, half the time each, both ('mixed').
     Evaluation always starts at the env's pose."""
+    steps_by_method: dict[str, int] = field(default_factory=dict)
+    """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
+    total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
+    registry checks the names when a run is planned (pirl.agents.runs.method_config)."""
 
     def validate(self) -> None:
         """A positive length and checkpoint interval, a known camera start."""
         self.require_positive("total_steps", "checkpoint_every")
         self.require_choice("camera_start", ("fixed", "random", "mixed"))
+        for name, steps in self.steps_by_method.items():
+            if steps <= 0:
+                raise self.refuse("steps_by_method", f"{name}: must be > 0")
 
 
 @dataclass(frozen=True)

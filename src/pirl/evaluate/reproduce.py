@@ -23,8 +23,8 @@ from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
 from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind
 from pirl.agents import checkpoint
 from pirl.agents.loading import BUILTIN, check_act
-from pirl.agents.methods import asks, trained_method
-from pirl.agents.runs import check_layouts, train_one
+from pirl.agents.methods import asks, label, trained_method
+from pirl.agents.runs import check_layouts, method_steps, train_one
 from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
@@ -109,6 +109,7 @@ def plan_runs(cfg: RunConfig, advisor: str) -> list[PlannedRun]:
     if rp.headline_act not in rp.acts:
         raise ConfigError(f"reproduce.headline_act {rp.headline_act!r} is not in acts")
     variants = pirl_variants(cfg, advisor) if any(e.advised for e in entries) else []
+    method_steps(cfg, "")  # a bad train.steps_by_method name is refused before any training
     plan = []
     for seed in rp.seeds:
         for entry in entries:
@@ -327,6 +328,17 @@ RATES: dict[str, Any] = {
 }
 
 
+def steps_text(cfg: RunConfig) -> str:
+    """The training budget in words: '409,600 steps', or with each method's own budget
+    ('409,600 steps (PPO-EWRI 1,638,400)') when ``train.steps_by_method`` names one."""
+    own = [
+        f"{label(name)} {steps:,}"
+        for name, steps in cfg.train.steps_by_method.items()
+        if steps != cfg.train.total_steps
+    ]
+    return f"{cfg.train.total_steps:,} steps" + (f" ({', '.join(own)})" if own else "")
+
+
 def describe_plan(
     cfg: RunConfig, advisor: str, out: Path, train_workers: int, eval_workers: int
 ) -> list[str]:
@@ -342,13 +354,14 @@ def describe_plan(
         if entry.expert:
             ppo_s += r["il_s"]
         elif not entry.advised:
-            ppo_s += cfg.train.total_steps / r["ppo_steps_per_s"]
+            ppo_s += method_steps(cfg, j.method) / r["ppo_steps_per_s"]
         else:
             pare = cfg.with_overrides(pare=dict(j.pare)).pare
             kind = advisor_kind(j.advisor)
-            ppo_s += cfg.train.total_steps * kind.train_cost / r["ppo_steps_per_s"]
+            steps = method_steps(cfg, j.method)
+            ppo_s += steps * kind.train_cost / r["ppo_steps_per_s"]
             if pare.mode != "student" and kind.sync_batch_s:  # every K steps an answer
-                batches = cfg.train.total_steps / pare.query_every / kind.batch_size(cfg)
+                batches = steps / pare.query_every / kind.batch_size(cfg)
                 ppo_s += batches * kind.sync_batch_s
     phases = {p.name: p for p in teacher_phases(cfg, todo).values()}
     phase_lines = []
@@ -384,8 +397,8 @@ def describe_plan(
     total_eval = learned * rp.episodes * len(sizes)
     return [
         *phase_lines,
-        f"plan: {len(jobs)} training runs ({len(todo)} to train) of {cfg.train.total_steps:,} "
-        f"steps, seeds {list(rp.seeds)}, in {train_workers} worker processes: about "
+        f"plan: {len(jobs)} training runs ({len(todo)} to train) of {steps_text(cfg)}, "
+        f"seeds {list(rp.seeds)}, in {train_workers} worker processes: about "
         f"{train_min:.0f} min",
         f"plan: evaluation of {total_eval:,} episodes of trained policies "
         f"({rp.episodes} scenarios x {len(sizes)} sizes x {len(rp.acts)} act modes x "
@@ -497,8 +510,8 @@ def reproduce(
     stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl")
     notes = [
         f"Profile values: {rp.episodes} scenarios per size ({rp.llm_only_episodes} for "
-        f"LLM-only), training seeds {list(rp.seeds)}, {cfg.train.total_steps:,} steps per "
-        f"PPO run; physics simulator: {rp.physics_episodes} scenarios on "
+        f"LLM-only), training seeds {list(rp.seeds)}, {steps_text(cfg)} per PPO run; "
+        f"physics simulator: {rp.physics_episodes} scenarios on "
         f"{', '.join(rp.physics_sizes) or 'no size'}. "
         f"Training took {trained_s / 60:.1f} min ({train_workers} worker processes), "
         f"everything {(time.perf_counter() - started) / 60:.1f} min.",
