@@ -77,23 +77,17 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory-long": {
         "ppo": {"action_masking": True},
         "env": MEMORY,
-        "train": {**FIXED, "total_steps": 819200},
+        "train": {**FIXED, "total_steps": 819200, "steps_by_method": {}},
     },
     "masked-memory-long3x": {
         "ppo": {"action_masking": True},
         "env": MEMORY,
-        "train": {**FIXED, "total_steps": 1228800},
+        "train": {**FIXED, "total_steps": 1228800, "steps_by_method": {}},
     },
     "masked-memory-long4x": {
         "ppo": {"action_masking": True},
         "env": MEMORY,
-        "train": {**FIXED, "total_steps": 1638400},
-    },
-    # Each method at the smallest budget where every validation seed covered >= 0.90.
-    "masked-memory-own-budgets": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {**FIXED, "total_steps": 409600, "steps_by_method": {"ppo-ewri": 1638400}},
+        "train": {**FIXED, "total_steps": 1638400, "steps_by_method": {}},
     },
     # More learning per step, for a fixed budget (the demo's): a larger step size, more epochs.
     "masked-memory-lr6e4": {
@@ -145,7 +139,8 @@ def main() -> None:
                         choices=sorted(VARIANTS))  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     parser.add_argument("--methods", nargs="+", default=None, help="default: the profile's")
-    parser.add_argument("--steps", type=int, default=None, help="PPO steps (default: profile)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="PPO steps of every method (default: the profile's)")  # fmt: skip
     parser.add_argument("--sizes", nargs="+", default=["30", "45", "60"])
     parser.add_argument("--episodes", type=int, default=6, help="scenarios per size")
     parser.add_argument("--split", default="validation", choices=("validation", "evaluation"))
@@ -155,7 +150,8 @@ def main() -> None:
 
     base = RunConfig.from_yaml(args.profile)
     if args.steps:
-        base = base.with_overrides(train={"total_steps": args.steps})
+        # One budget for every method (the profile's own per-method budgets are dropped).
+        base = base.with_overrides(train={"total_steps": args.steps, "steps_by_method": {}})
     base = base.with_overrides(reproduce={"seeds": args.seeds})
     if args.methods:
         base = base.with_overrides(reproduce={"methods": args.methods})
