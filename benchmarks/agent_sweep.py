@@ -38,84 +38,44 @@ ROOT = Path(__file__).resolve().parents[1]
 PAPER_OBS = {"obs_visits": False, "obs_target": False}
 MEMORY = {"obs_visits": True, "obs_target": True}
 FIXED = {"camera_start": "fixed"}  # training starts at the paper's camera pose
+
+
+def overrides(masks: bool = True, env=MEMORY, ppo=None, train=None) -> dict[str, dict]:
+    """Overrides of one variant: masks or not, observation blocks, other PPO and train
+    settings (training from the paper's camera pose unless ``train`` says otherwise)."""
+    return {
+        "ppo": {"action_masking": masks, **(ppo or {})},
+        "env": dict(env),
+        "train": {**FIXED, **(train or {})},
+    }
+
+
+def budget(steps: int) -> dict:
+    """One budget for every method (the profile's per-method budgets dropped)."""
+    return {"total_steps": steps, "steps_by_method": {}}
+
+
 VARIANTS: dict[str, dict[str, dict]] = {
-    "unmasked": {"ppo": {"action_masking": False}, "env": PAPER_OBS, "train": FIXED},
-    "masked": {"ppo": {"action_masking": True}, "env": PAPER_OBS, "train": FIXED},
-    "masked-memory": {"ppo": {"action_masking": True}, "env": MEMORY, "train": FIXED},
-    "masked-visits": {
-        "ppo": {"action_masking": True},
-        "env": {**PAPER_OBS, "obs_visits": True},
-        "train": FIXED,
-    },
-    "masked-target": {
-        "ppo": {"action_masking": True},
-        "env": {**PAPER_OBS, "obs_target": True},
-        "train": FIXED,
-    },
+    "unmasked": overrides(masks=False, env=PAPER_OBS),
+    "masked": overrides(env=PAPER_OBS),
+    "masked-memory": overrides(),
+    "masked-visits": overrides(env={**PAPER_OBS, "obs_visits": True}),
+    "masked-target": overrides(env={**PAPER_OBS, "obs_target": True}),
     # Exploring starts: training episodes begin at a random camera pose (evaluation never does).
-    "masked-memory-explore": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {"camera_start": "random"},
-    },
-    "masked-memory-mixed": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {"camera_start": "mixed"},
-    },
+    "masked-memory-explore": overrides(train={"camera_start": "random"}),
+    "masked-memory-mixed": overrides(train={"camera_start": "mixed"}),
     # Longer credit horizons, more exploration, a longer budget (PPO-EWRI's battery-bound runs).
-    "masked-memory-gamma995": {
-        "ppo": {"action_masking": True, "gamma": 0.995},
-        "env": MEMORY,
-        "train": FIXED,
-    },
-    "masked-memory-ent03": {
-        "ppo": {"action_masking": True, "ent_coef": 0.03},
-        "env": MEMORY,
-        "train": FIXED,
-    },
-    "masked-memory-long": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {**FIXED, "total_steps": 819200, "steps_by_method": {}},
-    },
-    "masked-memory-long3x": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {**FIXED, "total_steps": 1228800, "steps_by_method": {}},
-    },
-    "masked-memory-long4x": {
-        "ppo": {"action_masking": True},
-        "env": MEMORY,
-        "train": {**FIXED, "total_steps": 1638400, "steps_by_method": {}},
-    },
+    "masked-memory-gamma995": overrides(ppo={"gamma": 0.995}),
+    "masked-memory-ent03": overrides(ppo={"ent_coef": 0.03}),
+    "masked-memory-long": overrides(train=budget(819200)),
+    "masked-memory-long3x": overrides(train=budget(1228800)),
+    "masked-memory-long4x": overrides(train=budget(1638400)),
     # More learning per step, for a fixed budget (the demo's): a larger step size, more epochs.
-    "masked-memory-lr6e4": {
-        "ppo": {"action_masking": True, "learning_rate": 0.0006},
-        "env": MEMORY,
-        "train": FIXED,
-    },
-    "masked-memory-lr1e3": {
-        "ppo": {"action_masking": True, "learning_rate": 0.001},
-        "env": MEMORY,
-        "train": FIXED,
-    },
-    "masked-memory-ent0": {
-        "ppo": {"action_masking": True, "ent_coef": 0.0},
-        "env": MEMORY,
-        "train": FIXED,
-    },
-    "masked-memory-epochs8": {
-        "ppo": {"action_masking": True, "n_epochs": 8},
-        "env": MEMORY,
-        "train": FIXED,
-    },
+    "masked-memory-lr6e4": overrides(ppo={"learning_rate": 0.0006}),
+    "masked-memory-lr1e3": overrides(ppo={"learning_rate": 0.001}),
+    "masked-memory-epochs8": overrides(ppo={"n_epochs": 8}),
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
-    "masked-memory-train30": {
-        "ppo": {"action_masking": True},
-        "env": {**MEMORY, "size": [30, 30, 3]},
-        "train": FIXED,
-    },
+    "masked-memory-train30": overrides(env={**MEMORY, "size": [30, 30, 3]}),
 }
 
 
@@ -151,7 +111,7 @@ def main() -> None:
     base = RunConfig.from_yaml(args.profile)
     if args.steps:
         # One budget for every method (the profile's own per-method budgets are dropped).
-        base = base.with_overrides(train={"total_steps": args.steps, "steps_by_method": {}})
+        base = base.with_overrides(train=budget(args.steps))
     base = base.with_overrides(reproduce={"seeds": args.seeds})
     if args.methods:
         base = base.with_overrides(reproduce={"methods": args.methods})
