@@ -32,16 +32,21 @@ def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]]) -> Non
         draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
 
 
-def method_steps(cfg: RunConfig, method: str) -> int:
-    """The steps ``method`` trains in ``cfg``: its ``train.steps_by_method`` entry, else
-    ``train.total_steps``. Every name there must be a method trained with PPO steps (one line
-    otherwise, before any folder is made)."""
+def check_budgets(cfg: RunConfig) -> None:
+    """Refuse in one line a ``train.steps_by_method`` name that is not a method trained in PPO
+    steps (called before any folder is made)."""
     for name in cfg.train.steps_by_method:
         if trained_method(name, "train.steps_by_method").training != TRAIN_PPO:
             raise ConfigError(
                 f"train.steps_by_method: {name} is not trained in PPO steps "
                 f"(its budget is in the il section)"
             )
+
+
+def method_steps(cfg: RunConfig, method: str) -> int:
+    """The steps ``method`` trains in ``cfg``: its ``train.steps_by_method`` entry, else
+    ``train.total_steps``."""
+    check_budgets(cfg)
     return cfg.train.steps_by_method.get(method, cfg.train.total_steps)
 
 

@@ -24,7 +24,7 @@ from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind
 from pirl.agents import checkpoint
 from pirl.agents.loading import BUILTIN, check_act
 from pirl.agents.methods import asks, label, trained_method
-from pirl.agents.runs import check_layouts, method_steps, train_one
+from pirl.agents.runs import check_budgets, check_layouts, method_steps, train_one
 from pirl.agents.teacher_phase import TeacherPhase, phase_of, run_teacher_phase
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
@@ -109,7 +109,7 @@ def plan_runs(cfg: RunConfig, advisor: str) -> list[PlannedRun]:
     if rp.headline_act not in rp.acts:
         raise ConfigError(f"reproduce.headline_act {rp.headline_act!r} is not in acts")
     variants = pirl_variants(cfg, advisor) if any(e.advised for e in entries) else []
-    method_steps(cfg, "")  # a bad train.steps_by_method name is refused before any training
+    check_budgets(cfg)
     plan = []
     for seed in rp.seeds:
         for entry in entries:
