@@ -87,7 +87,7 @@ class TrainSettings(Settings, section="train"):
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
-    registry checks the names when a run is planned (pirl.agents.runs.method_config)."""
+    registry checks the names when a run is planned (pirl.agents.runs.check_budgets)."""
 
     def validate(self) -> None:
         """A positive length and checkpoint interval, a known camera start."""
