@@ -14,7 +14,7 @@ import os
 import shutil
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -30,9 +30,11 @@ from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.evaluate.runner import (
     EvalPlan,
+    MethodSpec,
     check_workers,
     distinct_specs,
     evaluate,
+    process_pool,
     spec_for_builtin,
     spec_for_run,
 )
@@ -40,6 +42,7 @@ from pirl.evaluate.scenarios import parse_size, scenario_seeds
 from pirl.evaluate.summary import honest_label
 
 Log = Callable[[str], None]
+GIF_SIZE = (30, 30, 3)
 
 
 def _run_state(run: Path) -> str:
@@ -409,42 +412,53 @@ def describe_plan(
     ]
 
 
-def record_gifs(cfg: RunConfig, runs: list[Path], advisor: str, folder: Path) -> dict[str, Path]:
-    """One animation per method on the same 30x30x3 scenario (the first evaluation seed);
-    trained policies act in the headline act mode, named in the caption."""
+def _record_gif(
+    spec: MethodSpec, cfg_dict: dict[str, Any], seed: int, path: Path
+) -> tuple[str, Path]:
+    """One animation (in a worker process): ``spec`` on the 30x30x3 scenario ``seed``, a
+    trained policy acting in the headline act mode. Returns (caption, GIF path)."""
     from pirl.advice.factory import make_advisor
     from pirl.agents.loading import load_policy
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_episode, save_gif
 
-    size = (30, 30, 3)
-    seed = scenario_seeds(size, 1)[0]
-    env = VCPPEnv(cfg.env.replace(size=size, render_cell_px=8), render_mode="rgb_array")
+    _quiet.install()
+    cfg = RunConfig.from_dict(cfg_dict)
+    env = VCPPEnv(cfg.env.replace(size=GIF_SIZE, render_cell_px=8), render_mode="rgb_array")
+    act = cfg.reproduce.headline_act
+    adv = make_advisor(spec.advisor, cfg) if spec.advisor else None
+    policy = load_policy(
+        spec.source,
+        advisor=adv,
+        seed=0,
+        max_calls=spec.max_calls,
+        prompt_variant=cfg.pare.prompt_variant,
+        act=act,
+    )
+    result = run_episode(env, policy, seed, record=True, frame_every=cfg.reproduce.gif_every)
+    how = f", act {act}" if spec.source not in BUILTIN else ""
+    caption = f"{honest_label(spec.label, [spec.source])}{how}: VCR {result.metrics['vcr']:.2f}"
+    return caption, save_gif(result.frames, path, fps=12)
+
+
+def start_gifs(
+    pool: Executor, cfg: RunConfig, runs: list[Path], advisor: str, folder: Path
+) -> list[Future]:
+    """Submit one animation per method to ``pool``, all on the same 30x30x3 scenario (the
+    first evaluation seed), trained policies from the first training seed; each future gives
+    (caption, GIF path)."""
+    seed = scenario_seeds(GIF_SIZE, 1)[0]
     specs = [spec_for_run(r) for r in runs if r.name.endswith(f"-s{cfg.reproduce.seeds[0]}")]
     specs += [
         spec_for_builtin(name, advisor, cfg.reproduce.llm_only_max_calls)
         for name in cfg.reproduce.builtins
         if name in ("llm-only", "boustrophedon")  # the random walk's animation shows nothing
     ]
-    act = cfg.reproduce.headline_act
-    gifs = {}
-    for spec in distinct_specs(specs):
-        adv = make_advisor(spec.advisor, cfg) if spec.advisor else None
-        policy = load_policy(
-            spec.source,
-            advisor=adv,
-            seed=0,
-            max_calls=spec.max_calls,
-            prompt_variant=cfg.pare.prompt_variant,
-            act=act,
-        )
-        result = run_episode(env, policy, seed, record=True, frame_every=cfg.reproduce.gif_every)
-        how = f", act {act}" if spec.source not in BUILTIN else ""
-        label = honest_label(spec.label, [spec.source])
-        gifs[f"{label}{how}: VCR {result.metrics['vcr']:.2f}"] = save_gif(
-            result.frames, folder / f"{spec.key}.gif", fps=12
-        )
-    return gifs
+    cfg_dict = cfg.to_dict()
+    return [
+        pool.submit(_record_gif, spec, cfg_dict, seed, folder / f"{spec.key}.gif")
+        for spec in distinct_specs(specs)
+    ]
 
 
 def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) -> None:
@@ -502,11 +516,13 @@ def reproduce(
         sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
     )
     log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
-    summary = evaluate(
-        plan, out / "eval", workers or rp.workers, progress=progress, ray_address=ray_address
-    )
-    log("recording animations")
-    gifs = record_gifs(cfg, runs, advisor, out / "report" / "gifs")
+    # The animations record in processes of their own beside the evaluation's.
+    with process_pool(workers or rp.workers) as gif_pool:
+        gif_jobs = start_gifs(gif_pool, cfg, runs, advisor, out / "report" / "gifs")
+        summary = evaluate(
+            plan, out / "eval", workers or rp.workers, progress=progress, ray_address=ray_address
+        )
+        gifs = dict(job.result() for job in gif_jobs)
     stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl")
     notes = [
         f"Profile values: {rp.episodes} scenarios per size ({rp.llm_only_episodes} for "

@@ -252,6 +252,9 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
                 chunk = max(1, math.ceil(len(seeds) / parts))
                 for i in range(0, len(seeds), chunk):
                     tasks.append((spec, size, sim, seeds[i : i + chunk], act))
+    # Longest first, so no long episode starts last while the other workers idle: the
+    # physics simulator's (seconds each), then the grid's largest worlds.
+    tasks.sort(key=lambda t: (t[2] != "physics", -t[1][0] * t[1][1]))
     return tasks
 
 
