@@ -76,9 +76,6 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory-epochs8": overrides(ppo={"n_epochs": 8}),
     # Less entropy bonus: a sampled policy that leans less on chance camera actions.
     "masked-memory-ent005": overrides(ppo={"ent_coef": 0.005}),
-    "masked-memory-ent0": overrides(ppo={"ent_coef": 0.0}),
-    # Twice the worlds per rollout (the same steps in half the rollouts, larger forward batches).
-    "masked-memory-envs32": overrides(ppo={"n_envs": 32}),
     # More steps, fewer passes over each rollout: about the update cost of 262,144 x 4 epochs.
     "masked-memory-s409e2": overrides(ppo={"n_epochs": 2}, train=budget(409600)),
     "masked-memory-s409e3": overrides(ppo={"n_epochs": 3}, train=budget(409600)),

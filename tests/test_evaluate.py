@@ -87,6 +87,24 @@ def test_bad_plans_are_refused(tmp_path):
         evaluate(EvalPlan([], [(10, 10, 3)], 1), tmp_path)
 
 
+def test_longest_tasks_are_handed_out_first():
+    """Physics episodes (seconds each) go to the workers before grid chunks, larger worlds
+    first, so no long task starts last while the other workers idle."""
+    from pirl.evaluate.runner import _tasks
+
+    plan = EvalPlan(
+        [spec_for_builtin("boustrophedon"), spec_for_builtin("random")],
+        [(10, 10, 3), (30, 30, 3), (20, 20, 3)], 2, sims=["grid", "physics"],
+        sim_sizes={"physics": [(10, 10, 3)]},
+    )  # fmt: skip
+    tasks = _tasks(plan, 2)
+    sims = [t[2] for t in tasks]
+    assert sims == ["physics"] * sims.count("physics") + ["grid"] * sims.count("grid")
+    assert sims.count("physics") == 4  # 2 methods x 2 episodes, one per task
+    areas = [t[1][0] * t[1][1] for t in tasks if t[2] == "grid"]
+    assert areas == sorted(areas, reverse=True) and areas[0] == 900
+
+
 # -- act modes, batching, seeds as the unit (issue 10) ---------------------------------------
 @pytest.fixture(scope="module")
 def trained_runs(tmp_path_factory):
