@@ -55,3 +55,64 @@ def test_target_points_at_the_nearest_uncovered_cell():
         assert np.isclose(tx, ((todo[k, 0] - x) / d[k] + 1) / 2, atol=1e-6)
         assert np.isclose(ty, ((todo[k, 1] - y) / d[k] + 1) / 2, atol=1e-6)
         assert np.isclose(dist, min(d[k], TARGET_RANGE) / TARGET_RANGE, atol=1e-6)
+
+
+def _way(blocked: np.ndarray, todo: np.ndarray, x: int, y: int, z: int):
+    """Breadth-first search in plain Python, moves in the action order x+, x-, y+, y-: the
+    first move and length of the way to the nearest cell of ``todo``, or None."""
+    from collections import deque
+
+    sx, sy = todo.shape
+    first = {(x, y): None}
+    moves = {(x, y): 0}
+    queue = deque([(x, y)])
+    while queue:
+        c = queue.popleft()
+        if c != (x, y) and todo[c]:
+            return first[c], moves[c]
+        for m in (D.X_PLUS, D.X_MINUS, D.Y_PLUS, D.Y_MINUS):
+            dx, dy, _ = D.MOVE_DELTAS[m]
+            n = (c[0] + dx, c[1] + dy)
+            if 0 <= n[0] < sx and 0 <= n[1] < sy and not blocked[n[0], n[1], z] and n not in moves:
+                moves[n] = moves[c] + 1
+                first[n] = m if c == (x, y) else first[c]
+                queue.append(n)
+    return None
+
+
+def test_path_target_follows_the_way_round_obstacles():
+    """With obs_target_path the block gives the first move of the shortest way (at the UAV's
+    altitude, round blocked cells) to the nearest uncovered cell: a move the mask allows, the
+    same as an independent search, at every step of random flights."""
+    venv = make_vec_env(4, seed=5, obs_target=True, obs_target_path=True, **SMALL)
+    obs = venv.reset()
+    rng = np.random.default_rng(0)
+    w = venv.world
+    checked = 0
+    for _ in range(40):
+        masks = venv.action_masks()
+        for e in range(4):
+            x, y, z = w.position(e)
+            todo = w.coverable[e] & (w.views[e] == 0)
+            way = _way(w.blocked[e], todo, x, y, z)
+            if todo[x, y] or way is None:  # above work, or none reachable at this altitude
+                continue
+            move, moves = way
+            dx, dy, _ = D.MOVE_DELTAS[move]
+            assert np.allclose(obs[e, -3:], [(dx + 1) / 2, (dy + 1) / 2, min(moves, 16) / 16])
+            assert masks[e, move]  # never into a wall or off the grid
+            checked += 1
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        obs, *_ = venv.step(actions)
+    assert checked > 100
+    assert w.blocked.any()  # the worlds had obstacles to go round
+
+
+def test_path_target_needs_the_target_block():
+    import pytest
+
+    from pirl.config.errors import ConfigError
+    from pirl.config.world import VCPPConfig
+
+    with pytest.raises(ConfigError, match="obs_target_path.*needs obs_target"):
+        VCPPConfig(obs_target_path=True)

@@ -109,7 +109,7 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
     # Optional observation blocks change the features; the default layout keeps its old keys.
     parts += [
         f"{name}={getattr(env_cfg, name)}"
-        for name in ("obs_visits", "obs_target")
+        for name in ("obs_visits", "obs_target", "obs_target_path")
         if getattr(env_cfg, name, False)
     ]  # fmt: skip
     digest = hashlib.sha256(json.dumps(parts, default=str).encode()).hexdigest()[:16]

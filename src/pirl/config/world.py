@@ -135,6 +135,10 @@ class VCPPConfig(Settings, section="env"):
     """Add the direction to the nearest coverable cell not yet covered and its distance in
     cells (saturating at 16), so a policy trained on a small world can find the work left on a
     large one where its local window shows none. False is the paper's observation."""
+    obs_target_path: bool = False
+    """With obs_target: find that cell by moves at the UAV's altitude around blocked cells
+    (breadth-first) and give the direction of the path's first move and its length, instead of
+    the straight line, which can point into a wall and trap a greedy policy in front of it."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
 
@@ -186,6 +190,8 @@ class VCPPConfig(Settings, section="env"):
             raise self.refuse("start_pan", "allowed values are -90, -75, ..., 90")
         zoom_to_tenths(self.start_zoom, self.where("start_zoom"))
         self.require_choice("start_camera", ("fixed", "random", "mixed"))
+        if self.obs_target_path and not self.obs_target:
+            raise self.refuse("obs_target_path", "needs obs_target: true (it changes that block)")
         if len(self.static_weights) != len(REWARD_TERMS):
             raise self.refuse(
                 "static_weights",

@@ -18,7 +18,11 @@ next W*W (obs_visits) (W, W)       local window: visits of each cell at the UAV'
                                    this episode, min(v, 3) / 3
 next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered (ground
                                    plane): (dx/d + 1)/2, (dy/d + 1)/2, min(d, 16)/16; 0.5,
-                                   0.5, 0 when none is left
+                                   0.5, 0 when none is left or the UAV is above one. With
+                                   obs_target_path: the nearest such cell by moves at the
+                                   UAV's altitude around blocked cells, (dx + 1)/2 and
+                                   (dy + 1)/2 of the path's first move and min(moves, 16)/16
+                                   (the straight line when none is reachable at that altitude)
 ====================  ===========  ==========================================================
 
 The last two blocks are off by default (the paper's observation: 317 values).
@@ -38,7 +42,10 @@ N_SCALARS = 11
 N_TARGET = 3
 TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
 # Bits of ObsLayout.extras: which optional blocks the observation has.
-EXTRA_VISITS, EXTRA_TARGET = 1, 2
+EXTRA_VISITS, EXTRA_TARGET, EXTRA_PATH = 1, 2, 4
+# The four horizontal moves, in the order of the actions 0-3 (x+, x-, y+, y-).
+MOVE_DX = (1, -1, 0, 0)
+MOVE_DY = (0, 0, 1, -1)
 
 
 class ObsLayout(NamedTuple):
@@ -63,8 +70,44 @@ def obs_size_for(cfg: VCPPConfig) -> int:
 
 def obs_layout(cfg: VCPPConfig) -> ObsLayout:
     """The :class:`ObsLayout` of an environment config, for the observation kernels."""
-    extras = (EXTRA_VISITS if cfg.obs_visits else 0) | (EXTRA_TARGET if cfg.obs_target else 0)
+    extras = (
+        (EXTRA_VISITS if cfg.obs_visits else 0)
+        | (EXTRA_TARGET if cfg.obs_target else 0)
+        | (EXTRA_PATH if cfg.obs_target_path else 0)
+    )
     return ObsLayout(int(cfg.obs_window), extras)
+
+
+@numba.njit(cache=True, inline="always")
+def path_to_work(w, e, x, y, z, sx, sy):
+    """Breadth-first search from (x, y) over the cells free at altitude z: (dx, dy) of the first
+    move towards the nearest coverable cell not yet covered, and the number of moves; moves -1
+    when none is reachable at that altitude. Unlike the straight line, this way round an
+    obstacle never points into it, so a greedy policy that follows it cannot oscillate in
+    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing)."""
+    queue, seen = w.path[e, 0], w.path[e, 1]
+    seen[: sx * sy] = -1
+    start = x * sy + y
+    seen[start] = 0
+    queue[0] = start
+    head, tail = 0, 1
+    while head < tail:
+        c = queue[head]
+        head += 1
+        cx, cy = c // sy, c % sy
+        if c != start and w.coverable[e, cx, cy] and w.views[e, cx, cy] == 0:
+            m = seen[c] % 4
+            return MOVE_DX[m], MOVE_DY[m], seen[c] // 4
+        for m in range(4):
+            nx, ny = cx + MOVE_DX[m], cy + MOVE_DY[m]
+            if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[e, nx, ny, z]:
+                k = nx * sy + ny
+                if seen[k] < 0:
+                    # moves * 4 + the first move of the way (inherited past the start)
+                    seen[k] = (seen[c] // 4 + 1) * 4 + (m if c == start else seen[c] % 4)
+                    queue[tail] = k
+                    tail += 1
+    return 0, 0, -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -129,8 +172,15 @@ def observation(w, p, layout, e, out):
                     d2 = (i - x) * (i - x) + (j - y) * (j - y)
                     if best < 0 or d2 < best:
                         best, bi, bj = d2, i, j
+        moves = -1
+        if best > 0 and extras & EXTRA_PATH:
+            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy)
         if best <= 0:  # none left, or the UAV is above one
             o[k], o[k + 1], o[k + 2] = 0.5, 0.5, 0.0
+        elif moves > 0:
+            o[k] = (dx + 1.0) / 2.0
+            o[k + 1] = (dy + 1.0) / 2.0
+            o[k + 2] = min(moves, TARGET_RANGE) / TARGET_RANGE
         else:
             d = np.sqrt(best)
             o[k] = ((bi - x) / d + 1.0) / 2.0

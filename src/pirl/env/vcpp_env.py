@@ -68,6 +68,9 @@ class VCPPEnv(gym.Env):
                                        steps left / limit, blocked above, blocked below
     ====================  ===========  ======================================================
 
+    ``obs_visits`` adds W*W visit counts and ``obs_target`` 3 values towards the nearest work
+    left (by the way round obstacles with ``obs_target_path``): :mod:`pirl.env.observation`.
+
     ## Rewards
     ``r = sum_k w_k * term_k`` over ``coverage`` (new cells / largest footprint), ``redundant``
     (view added nothing), ``battery`` (energy used / energy of one x/y move), ``cam_usage``

@@ -553,7 +553,8 @@ def settings_line(cfg: RunConfig) -> str:
     env = cfg.env
     named = (
         ("visit counts", env.obs_visits),
-        ("way to the nearest uncovered cell", env.obs_target),
+        ("way to the nearest uncovered cell", env.obs_target and not env.obs_target_path),
+        ("path round obstacles to the nearest uncovered cell", env.obs_target_path),
     )
     blocks = [name for name, on in named if on]
     masks = (

@@ -447,10 +447,10 @@ def _check_observations(plan: EvalPlan) -> None:
         if not cfg_path.is_file():
             continue
         trained = (yaml.safe_load(cfg_path.read_text()) or {}).get("env", {})
-        for key in ("obs_window", "obs_global", "obs_visits", "obs_target"):
+        for key in ("obs_window", "obs_global", "obs_visits", "obs_target", "obs_target_path"):
             if trained.get(key, False) != getattr(plan.env, key):
                 raise ConfigError(
-                    f"{spec.source} was trained with {key}={trained[key]}, "
+                    f"{spec.source} was trained with {key}={trained.get(key, False)}, "
                     f"the evaluation uses {getattr(plan.env, key)}"
                 )
 

@@ -111,6 +111,9 @@ class WorldArrays(NamedTuple):
     """(Y,) coarse block of each y."""
     buf: np.ndarray
     """(N, rows, 2) scratch rows for each world's footprint."""
+    path: np.ndarray
+    """(N, 2, X*Y) scratch of the observation's path search: its queue, and each cell's
+    moves * 4 + first move (-1 not reached)."""
 
 
 class Params(NamedTuple):
@@ -285,6 +288,7 @@ class WorldBatch:
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
             block_y=(np.arange(sy) * g // sy).astype(np.int64),
             buf=np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64),
+            path=np.zeros((num, 2, sx * sy), dtype=np.int32),
         )
         self.params = Params(
             *self.lens,
