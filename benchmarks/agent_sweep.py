@@ -86,6 +86,10 @@ VARIANTS: dict[str, dict[str, dict]] = {
     # The target block by the way round obstacles (breadth-first), not the straight line, which
     # trapped greedy policies in front of walls on 60x60x3 (docs/results.md).
     "masked-memory-path": overrides(env={**MEMORY, "obs_target_path": True}),
+    # ... with PPO-EWRI at 409,600 steps (the other methods at the profile's budget).
+    "masked-memory-path-ewri409": overrides(
+        env={**MEMORY, "obs_target_path": True}, train={"steps_by_method": {"ppo-ewri": 409600}}
+    ),
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
     "masked-memory-train30": overrides(env={**MEMORY, "size": [30, 30, 3]}),
 }

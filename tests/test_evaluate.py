@@ -247,3 +247,19 @@ def test_report_settings_line_says_masked_or_not():
         train={"camera_start": "random"}
     )
     assert "random camera poses" in settings_line(starts)
+
+
+def test_a_run_is_evaluated_only_with_its_own_observation(trained_runs, tmp_path):
+    """A run trained with the straight-line target, evaluated where the env finds the way round
+    obstacles (same observation length, other meaning): refused in one line that says what to
+    do, before any episode."""
+    from pirl.evaluate.runner import spec_for_run
+
+    cfg, runs = trained_runs
+    plan = EvalPlan(
+        specs=[spec_for_run(runs[0])], sizes=[(12, 12, 3)], episodes=1,
+        env=cfg.env.replace(obs_target_path=True), config=cfg,
+    )  # fmt: skip
+    with pytest.raises(ConfigError, match="obs_target_path=False.*train it again"):
+        evaluate(plan, tmp_path / "eval")
+    assert not (tmp_path / "eval" / "episodes.jsonl").exists()

@@ -451,7 +451,8 @@ def _check_observations(plan: EvalPlan) -> None:
             if trained.get(key, False) != getattr(plan.env, key):
                 raise ConfigError(
                     f"{spec.source} was trained with {key}={trained.get(key, False)}, "
-                    f"the evaluation uses {getattr(plan.env, key)}"
+                    f"the evaluation uses {getattr(plan.env, key)}: evaluate it with its own "
+                    "env settings, or train it again (a new --out, or remove that folder)"
                 )
 
 
