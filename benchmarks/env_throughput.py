@@ -17,8 +17,12 @@ even where the absolute numbers are noisy (a shared machine):
 exported to a temporary folder and measured in a child process, interleaved with this code's
 rows, best of two each): the same run measures a change against the code before it.
 
+``--baseline-settings JSON`` measures the same batched rows with other env settings, as a
+ratio (e.g. an observation option on against off).
+
 Usage: ``python benchmarks/env_throughput.py [--seconds 2] [--envs 64] [--size 60x60x3]
-[--footprint paper] [--threads] [--against REV]``.
+[--footprint paper] [--threads] [--against REV] [--settings JSON] [--baseline-settings
+JSON]``.
 """
 
 from __future__ import annotations
@@ -151,6 +155,9 @@ def main() -> None:
     parser.add_argument("--threads", action="store_true", help="also numba threads (parallel)")
     parser.add_argument("--against", metavar="REV", help="also measure git revision REV")
     parser.add_argument("--settings", default="{}", help="JSON of extra env settings")
+    parser.add_argument("--baseline-settings", metavar="JSON",
+                        help="also measure the batched rows with these extra env settings "
+                             "instead, and print --settings' rate as a ratio of them")  # fmt: skip
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     import json
@@ -186,6 +193,21 @@ def main() -> None:
         print(f"{name:<28} {value:>12,.0f} {value / naive:>8.1f} {value / single:>9.1f}")
     if args.against:
         compare(args.against, settings, n, args.seconds)
+    if args.baseline_settings:
+        base = {"size": list(size), "footprint": args.footprint}
+        base.update(json.loads(args.baseline_settings))
+        # Interleaved, best of two each, so drift on a shared machine hits both alike.
+        ours, theirs = {}, {}
+        for _ in range(2):
+            for into, what in ((ours, settings), (theirs, base)):
+                for key, value in core_rates(what, n, args.seconds).items():
+                    into[key] = max(into.get(key, 0.0), value)
+        print(f"--settings {args.settings} against --baseline-settings {args.baseline_settings}:")
+        for key in ours:
+            print(
+                f"{key + f'({n})':<28} {ours[key]:>12,.0f} vs {theirs[key]:>12,.0f}  "
+                f"{ours[key] / theirs[key]:.2f}x"
+            )
 
 
 if __name__ == "__main__":
