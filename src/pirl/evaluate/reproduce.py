@@ -417,12 +417,15 @@ def _record_gif(
 ) -> tuple[str, Path]:
     """One animation (in a worker process): ``spec`` on the 30x30x3 scenario ``seed``, a
     trained policy acting in the headline act mode. Returns (caption, GIF path)."""
+    import torch
+
     from pirl.advice.factory import make_advisor
     from pirl.agents.loading import load_policy
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_episode, save_gif
 
     _quiet.install()
+    torch.set_num_threads(1)  # beside the evaluation's workers, one core's share each
     cfg = RunConfig.from_dict(cfg_dict)
     env = VCPPEnv(cfg.env.replace(size=GIF_SIZE, render_cell_px=8), render_mode="rgb_array")
     act = cfg.reproduce.headline_act
