@@ -178,6 +178,11 @@ class BatchSource:
             answers = [Answer("", None, error=f"{type(exc).__name__}: {exc}")] * len(job.worlds)
         st.wait_s += time.perf_counter() - start
         self.job = None
+        if st.budget_exhausted:
+            # Reserved before the budget was found spent, answered after: shaping stopped at
+            # once when it was found, so these answers are counted, not used.
+            self.health.account(answers)
+            return
         for e, episode, answer in zip(job.worlds, job.episodes, answers, strict=True):
             if episode != board.episode[e]:
                 # That episode is over: its advice is about a state that no longer exists.
