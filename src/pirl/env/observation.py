@@ -164,6 +164,16 @@ def observation(w, p, layout, e, out):
                 o[k] = min(v, 3) / 3.0
                 k += 1
     if extras & EXTRA_TARGET:
+        moves = -1
+        if extras & EXTRA_PATH and not (coverable[e, x, y] and views[e, x, y] == 0):
+            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy)
+        if moves > 0:
+            o[k] = (dx + 1.0) / 2.0
+            o[k + 1] = (dy + 1.0) / 2.0
+            o[k + 2] = min(moves, TARGET_RANGE) / TARGET_RANGE
+            return
+        # The straight line: without obs_target_path, or when no way is open at this altitude
+        # (when a way is open the search alone runs: the hot path does one pass, not two).
         best = -1
         bi, bj = 0, 0
         for i in range(sx):
@@ -172,15 +182,8 @@ def observation(w, p, layout, e, out):
                     d2 = (i - x) * (i - x) + (j - y) * (j - y)
                     if best < 0 or d2 < best:
                         best, bi, bj = d2, i, j
-        moves = -1
-        if best > 0 and extras & EXTRA_PATH:
-            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy)
         if best <= 0:  # none left, or the UAV is above one
             o[k], o[k + 1], o[k + 2] = 0.5, 0.5, 0.0
-        elif moves > 0:
-            o[k] = (dx + 1.0) / 2.0
-            o[k + 1] = (dy + 1.0) / 2.0
-            o[k + 2] = min(moves, TARGET_RANGE) / TARGET_RANGE
         else:
             d = np.sqrt(best)
             o[k] = ((bi - x) / d + 1.0) / 2.0
