@@ -15,6 +15,7 @@ from rich.table import Table
 from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind, advisor_names
 from pirl.agents.methods import BUILTIN, TRAINED
 from pirl.config.errors import ConfigError
+from pirl.config.load import check_seed
 from pirl.config.world import VCPPConfig
 
 app = typer.Typer(
@@ -164,9 +165,16 @@ def render(
 ) -> None:
     """Fly one episode with a simple policy and write it as an animated GIF."""
     from pirl.env import VCPPEnv
+    from pirl.env.render import cell_pixels
     from pirl.evaluate import run_episode, save_gif
+    from pirl.evaluate.rollout import check_gif_target
+    from pirl.world.memory import check_memory
 
+    check_seed(seed)
+    check_gif_target(out, fps)
     cfg = _env_config(config, size=tuple(size), footprint=footprint)
+    px = cell_pixels(cfg.size, cfg.render_cell_px)
+    check_memory(cfg, 1, per_step_bytes=cfg.size[0] * cfg.size[1] * px * px * 3)
     env = VCPPEnv(cfg, render_mode="rgb_array")
     result = run_episode(env, _make_policy(policy, seed), seed, record=True)
     path = save_gif(result.frames, out, fps=fps)

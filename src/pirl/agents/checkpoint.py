@@ -1,9 +1,11 @@
 """Resumable training state: everything needed to continue a PPO run exactly.
 
 A checkpoint is a folder ``checkpoints/step_<N>/`` holding the SB3 model (weights and
-optimizer) and ``state.pkl`` (worlds, their random streams, PARE's state, the monitor's
-counters, the last observation and the global random states). It is written into a temporary
-folder and renamed, and ``checkpoints/LATEST`` is replaced atomically afterwards, so an
+optimizer, a copy for people; resuming does not read it) and ``state.npz`` (the policy and
+optimizer tensors, worlds, their random streams, PARE's state, the monitor's counters, the
+last observation and the global random states), written by :mod:`pirl.config.safe_state`:
+arrays and JSON only, so a checkpoint from anyone can be resumed without running its code.
+It is written into a temporary folder and renamed, and ``checkpoints/LATEST`` is replaced atomically afterwards, so an
 interrupted write never damages the last good checkpoint.
 """
 
@@ -11,7 +13,6 @@ from __future__ import annotations
 
 import copy
 import os
-import pickle
 import random
 import shutil
 from pathlib import Path
@@ -22,6 +23,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
 
+from pirl.config import safe_state
 from pirl.config.errors import ConfigError
 from pirl.env.vec_env import VCPPVecEnv
 
@@ -95,10 +97,7 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
         model.policy.load_state_dict(live)
         model.policy.optimizer.load_state_dict(live_opt)
         model.num_timesteps = live_steps
-    with open(tmp / "state.pkl", "wb") as fh:
-        pickle.dump(state, fh)
-        fh.flush()
-        os.fsync(fh.fileno())
+    safe_state.save(state, tmp / STATE_FILE)
     shutil.rmtree(final, ignore_errors=True)
     tmp.rename(final)
     _atomic_text(folder / "LATEST", name)
@@ -108,18 +107,24 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
     return final
 
 
+STATE_FILE = "state.npz"
+"""The resumable state in a checkpoint folder."""
+OLD_STATE_FILE = "state.pkl"
+"""What checkpoints held before they became safe to share: a pickle, never loaded."""
+
+
 def latest(folder: Path) -> Path | None:
     """The checkpoint LATEST points at, or None."""
     pointer = folder / "LATEST"
     if not pointer.is_file():
         return None
     path = folder / pointer.read_text().strip()
-    return path if (path / "state.pkl").is_file() and (path / "model.zip").is_file() else None
+    return path if (path / STATE_FILE).is_file() and (path / "model.zip").is_file() else None
 
 
 def load_state(path: Path) -> dict:
-    with open(path / "state.pkl", "rb") as fh:
-        return pickle.load(fh)
+    """The state of checkpoint folder ``path`` (arrays and JSON; nothing is unpickled)."""
+    return safe_state.load(path / STATE_FILE)
 
 
 def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
@@ -132,11 +137,15 @@ def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
     steps = sorted(folder.glob("step_*"), key=_step_of, reverse=True) if folder.is_dir() else []
     candidates = ([first] if first is not None else []) + [p for p in steps if p != first]
     for path in candidates:
-        if not ((path / "state.pkl").is_file() and (path / "model.zip").is_file()):
+        if (path / OLD_STATE_FILE).is_file() and not (path / STATE_FILE).is_file():
+            raise safe_state.refuse_pickle(path / OLD_STATE_FILE, "a checkpoint")
+        if not ((path / STATE_FILE).is_file() and (path / "model.zip").is_file()):
             continue
         try:
             state = load_state(path)
-        except Exception as exc:  # noqa: BLE001 - any unreadable pickle means "damaged"
+        except safe_state.UnsafeFile:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any unreadable state means "damaged"
             if log is not None:
                 log(f"resume: checkpoint {path} is damaged ({type(exc).__name__}); skipping it")
             continue

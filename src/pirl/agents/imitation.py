@@ -49,6 +49,7 @@ def load_expert(expert_run: Path) -> Any:
             f"--expert {expert_run} is a {method} run, not a finished PPO run "
             f"({', '.join(PPO_METHODS)})"
         )
+    IL.check_expert(str(expert_run), method)
     return PPOPolicy(model_file(expert_run), method, masked=run_masked(expert_run)).model
 
 

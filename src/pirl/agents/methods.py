@@ -51,6 +51,27 @@ class Method:
     asks: bool = False
     """Played by asking an advisor at every step (LLM-only): it takes ``--advisor``, plays
     ``reproduce.llm_only_episodes`` scenarios and its calls are counted."""
+    options: tuple[str, ...] = ()
+    """The ``pirl train`` options of this method beyond those every method takes (``--out``,
+    ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
+
+    def check_options(self, **given: object) -> None:
+        """Refuse, in one line, a ``pirl train`` option this method does not use (given = not
+        None)."""
+        for name, value in given.items():
+            if value is not None and name not in self.options:
+                takes = ", ".join(f"--{o}" for o in self.options) or "none of its own"
+                raise ConfigError(
+                    f"--{name} is not an option of --method {self.name} (it takes {takes})"
+                )
+
+    def check_expert(self, run: str, expert_method: str) -> None:
+        """Imitation: refuse an expert run of another method than :attr:`expert`."""
+        if expert_method != self.expert:
+            raise ConfigError(
+                f"--expert {run} is a {expert_method} run; --method {self.name} learns from a "
+                f"finished {self.expert} run"
+            )
 
     def folder(self, seed: int) -> str:
         """The run folder of this method and seed in ``pirl reproduce``'s ``runs/``."""
@@ -67,8 +88,15 @@ METHODS: dict[str, Method] = {
         Method("ppo-sr", "PPO-SR", reward="static"),
         Method("ppo-ewri", "PPO-EWRI"),
         Method("llm-only", "LLM-only", training=PLAYED, asks=True),
-        Method("il", "IL", training=TRAIN_IMITATION, expert="ppo-ewri", artifact="tabnet.zip"),
-        Method("pirl", "PIRL", advised=True),
+        Method(
+            "il",
+            "IL",
+            training=TRAIN_IMITATION,
+            expert="ppo-ewri",
+            artifact="tabnet.zip",
+            options=("expert",),
+        ),  # fmt: skip
+        Method("pirl", "PIRL", advised=True, options=("advisor", "student")),
         Method("boustrophedon", "boustrophedon (planner)", training=PLAYED, paper=False),
         Method("random", "random", training=PLAYED, paper=False),
     )

@@ -10,6 +10,7 @@ import contextlib
 import fcntl
 import json
 import os
+import shutil
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -111,6 +112,17 @@ def prepare_run_folder(out: Path, resume: bool, log: Any = None) -> tuple[Path, 
         if found is None and log is not None:
             log(f"resume: no complete checkpoint in {out / 'checkpoints'}; starting from step 0")
         return found
+    if out.exists() and never_saved(out):
+        # A run that failed before its first checkpoint saved nothing: start it again here.
+        lock_folder(out)
+        for path in folder_contents(out):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+        if log is not None:
+            log(f"{out} holds a run that stopped before its first checkpoint; starting it again")
+        return None
     if out.exists():
         raise ConfigError(
             f"run folder {out} already exists; pass --resume to continue it or choose --out"
@@ -123,6 +135,29 @@ def prepare_run_folder(out: Path, resume: bool, log: Any = None) -> tuple[Path, 
         ) from None
     lock_folder(out)
     return None
+
+
+_RUN_FILES = {"config.yaml", "meta.json", "episodes.csv", "tb", "checkpoints", LOCK_NAME}
+
+
+def never_saved(out: Path) -> bool:
+    """Whether ``out`` is a folder that holds nothing a run saved: empty, or the first files
+    of a run that stopped before its first checkpoint (no checkpoint, no model, not complete)."""
+    out = Path(out)
+    if not out.is_dir():
+        return False
+    names = {p.name for p in out.iterdir()}
+    if not names <= _RUN_FILES:
+        return False
+    if checkpoint.latest(out / "checkpoints") is not None or any(
+        (out / "checkpoints").glob("step_*")
+    ):
+        return False
+    try:
+        meta = json.loads((out / "meta.json").read_text()) if "meta.json" in names else {}
+    except (OSError, ValueError):
+        return False
+    return isinstance(meta, dict) and not meta.get("complete")
 
 
 def git_commit() -> str:

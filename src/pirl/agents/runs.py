@@ -17,6 +17,7 @@ from typing import Any
 from pirl.advice.registry import advisor_kind
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, TRAIN_PPO, trained_method
 from pirl.config.errors import ConfigError
+from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 
@@ -118,6 +119,9 @@ def train_run(
     from pirl.agents.train import train
 
     entry = trained_method(method, "--method")
+    entry.check_options(expert=expert, advisor=advisor, student=student)
+    if seed is not None:
+        check_seed(seed)
     own = Path(out) / "config.yaml"
     if resume and config is None and own.is_file():
         cfg = RunConfig.from_yaml(own)  # resume continues the run that is in the folder

@@ -39,6 +39,7 @@ from pirl.agents.run_folder import (
     train_seed_base,
     write_json,
 )
+from pirl.agents.schedules import learning_rate_of
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
@@ -204,8 +205,7 @@ def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path | None) -
     With ``ppo.action_masking`` it is sb3-contrib's ``MaskablePPO``, which asks the env stack
     for ``action_masks()`` at every step (PARE and VecMonitor pass the call through)."""
     p = cfg.ppo
-    lr = p.learning_rate
-    learning_rate = (lambda progress: progress * lr) if p.lr_schedule == "linear" else lr
+    learning_rate = learning_rate_of(p)
     algo = PPO
     if p.action_masking:
         from sb3_contrib import MaskablePPO

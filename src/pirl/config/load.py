@@ -109,6 +109,17 @@ class Settings:
         }
 
 
+SEED_LIMIT = 2**32
+"""Seeds are 0 <= seed < 2**32: what numpy's and PyTorch's generators accept alike."""
+
+
+def check_seed(seed: int, option: str = "--seed") -> int:
+    """Refuse a seed outside 0 <= seed < 2**32 in one line naming ``option``."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT:
+        raise ConfigError(f"{option} {seed!r}: a seed must be an integer in 0 .. {SEED_LIMIT - 1}")
+    return seed
+
+
 def check_keys(values: Mapping[str, Any], known: list[str], section: str = "") -> None:
     """Refuse keys not in ``known``, naming the key, a close match and the allowed keys."""
     for key in values:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from pirl.config.load import Settings
+from pirl.config.load import Settings, check_seed
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 
@@ -285,6 +285,8 @@ class ReproduceSettings(Settings, section="reproduce"):
             raise self.refuse("teacher_phase_answers", "must be >= 0")
         if not self.seeds:
             raise self.refuse("seeds", "must be a non-empty list of integers")
+        for seed in self.seeds:
+            check_seed(seed, "reproduce.seeds:")
 
 
 @dataclass(frozen=True)

@@ -141,6 +141,10 @@ class VCPPConfig(Settings, section="env"):
     the straight line, which can point into a wall and trap a greedy policy in front of it."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
+    max_memory_gb: float = 0.0
+    """Most memory, GB, that the worlds of one command may need (their grids and recording
+    buffers, estimated before anything is allocated); a larger request is refused in one line.
+    0: half of this machine's memory. Not part of a run's identity (a resume may change it)."""
 
     def validate(self) -> None:
         """Sizes, choices, ranges and the camera's start pose on the action grid."""
@@ -151,6 +155,8 @@ class VCPPConfig(Settings, section="env"):
             )
         if max(size) > 2048:
             raise self.refuse("size", "sides above 2048 cells are not supported")
+        if not (math.isfinite(self.max_memory_gb) and self.max_memory_gb >= 0):
+            raise self.refuse("max_memory_gb", "must be >= 0 (0: half of this machine's memory)")
         self.require_choice("footprint", ("paper", "frustum"))
         self.require_choice("reward", ("static", "ewri"))
         if not 0.0 <= self.wind_prob <= 1.0:

@@ -11,6 +11,7 @@ import numpy as np
 
 from pirl.agents.loading import LearnedPolicy, act_rng
 from pirl.agents.policy import Policy
+from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
@@ -77,10 +78,30 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
 
 
 def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 12) -> Path:
-    """Write frames as an animated GIF (parent folders created); returns the path."""
+    """Write frames as an animated GIF (parent folders created); returns the path.
+
+    Written to a temporary name beside ``path`` and renamed, so a failed write (a full or
+    read-only disk) leaves neither a partial GIF nor a stray temporary file."""
     path = Path(path)
+    check_gif_target(path, fps)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.gif")
-    imageio.mimsave(tmp, frames, duration=1000 / fps, loop=0)
-    tmp.replace(path)
+    try:
+        with imageio.get_writer(tmp, mode="I", duration=1000 / fps, loop=0) as writer:
+            for frame in frames:
+                writer.append_data(frame)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
+
+
+def check_gif_target(path: Path, fps: int) -> None:
+    """Refuse, before an episode is flown, a GIF that could not be written: ``fps`` < 1 or a
+    ``path`` that is a folder."""
+    if fps < 1:
+        raise ConfigError(f"--fps {fps}: must be >= 1 frame per second")
+    if Path(path).is_dir():
+        raise ConfigError(
+            f"--out {path} is a folder; give the GIF file to write, e.g. {path}/episode.gif"
+        )

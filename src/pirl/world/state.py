@@ -31,6 +31,7 @@ from pirl.world.footprint import (
     lens_of,
     max_footprint_cells,
 )
+from pirl.world.memory import check_memory
 
 _MAX_SCENARIO_TRIES = 200
 
@@ -260,6 +261,7 @@ class WorldBatch:
     def __init__(self, cfg: VCPPConfig, num: int, parallel: bool | None = None) -> None:
         if num < 1:
             raise ConfigError(f"num_envs={num}: need at least 1 world")
+        check_memory(cfg, num)
         self.cfg = cfg
         self.num = num
         sx, sy, sz = cfg.size
