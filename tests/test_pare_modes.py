@@ -317,7 +317,7 @@ def test_build_pirl_advice_refuses_a_student_of_another_teacher(tmp_path):
     )
     advice = build_pirl_advice(cfg)
     advice.student.teacher = "someone:else:0000"
-    advice.student.save(tmp_path / "student.pt")
+    advice.student.save(tmp_path / "student.npz")
     with pytest.raises(UserError, match="imitates someone:else"):
         build_pirl_advice(cfg, student_path=tmp_path)
 

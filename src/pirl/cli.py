@@ -352,6 +352,7 @@ def distill(
     """Distil a teacher advisor into a student offline (for pirl train --student)."""
     from rich.progress import Progress
 
+    from pirl.advice.student import STUDENT_FILE
     from pirl.agents.distill import distill as run_distill
     from pirl.config.run import RunConfig
 
@@ -374,7 +375,7 @@ def distill(
         f"{record['majority']:.3f}) on {record['heldout']} held-out answers; "
         f"{record['dataset_size']} answers in the dataset"
     )
-    console.print(f"wrote {out / 'student.pt'}; train with --student {out}")
+    console.print(f"wrote {out / STUDENT_FILE}; train with --student {out}")
 
 
 @app.command()

@@ -44,7 +44,7 @@ from pirl._paths import cache_root
 from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
-from pirl.config import grid
+from pirl.config import grid, safe_state
 from pirl.world.state import WorldBatch
 
 FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
@@ -439,19 +439,20 @@ class Student:
         self.last_id = int(state["last_id"])
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the student (weights, optimizer, score, row ids) atomically."""
+        """Write the student (weights, optimizer, score, row ids) atomically, as arrays and
+        JSON (:mod:`pirl.config.safe_state`): a student from anyone loads without running code."""
         path = Path(path)
-        buf = io.BytesIO()
-        torch.save(self.state_dict(), buf)
         tmp = path.with_name(path.name + ".tmp")
-        tmp.write_bytes(buf.getvalue())
+        safe_state.save(self.state_dict(), tmp)
         os.replace(tmp, path)
         return path
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], dataset: TeacherDataset | None) -> Student:
-        """A student saved with :meth:`save`."""
-        state = torch.load(Path(path), map_location="cpu", weights_only=False)
+        """A student saved with :meth:`save` (nothing in the file is unpickled)."""
+        state = safe_state.load(Path(path))
+        if not isinstance(state, dict) or "teacher" not in state:
+            raise ValueError(f"{path} holds no student")
         student = cls(
             state["teacher"], state["n_features"], state["label"], state["hidden"], state["lr"],
             state["batch_size"],
@@ -460,8 +461,13 @@ class Student:
         return student
 
 
+STUDENT_FILE = "student.npz"
+"""The file of a student folder that :meth:`Student.save` writes (``pirl distill``)."""
+
+
 __all__ = [
     "CLASSES",
+    "STUDENT_FILE",
     "FIELDS",
     "Student",
     "StudentNet",

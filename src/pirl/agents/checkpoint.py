@@ -5,8 +5,8 @@ optimizer, a copy for people; resuming does not read it) and ``state.npz`` (the 
 optimizer tensors, worlds, their random streams, PARE's state, the monitor's counters, the
 last observation and the global random states), written by :mod:`pirl.config.safe_state`:
 arrays and JSON only, so a checkpoint from anyone can be resumed without running its code.
-It is written into a temporary folder and renamed, and ``checkpoints/LATEST`` is replaced atomically afterwards, so an
-interrupted write never damages the last good checkpoint.
+It is written into a temporary folder and renamed, and ``checkpoints/LATEST`` is replaced
+atomically afterwards, so an interrupted write never damages the last good checkpoint.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 States come from rollouts of simple or trained policies on the training world (a planner,
 random actions, a finished run); the teacher answers each sampled state; answers go into the
 shared teacher dataset; the student is fitted on every answer that dataset holds for this
-teacher and written to ``out/student.pt`` with ``out/student.json`` (its teacher, agreement,
+teacher and written to ``out/student.npz`` with ``out/student.json`` (its teacher, agreement,
 the majority baseline and how it was made). ``pirl train --method pirl --student out`` starts
 from it.
 """
@@ -20,10 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.loading import load_policy
+from pirl.advice.student import STUDENT_FILE
+from pirl.agents.loading import load_policy, run_meta
+from pirl.agents.methods import BUILTIN
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
 from pirl.agents.run_folder import folder_contents, lock_folder, release_folder
 from pirl.config.errors import ConfigError, UserError
+from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
 
 Progress = Callable[[int, int], None]
@@ -96,6 +99,15 @@ def distill(
         raise ConfigError(f"student folder {out} already exists; choose another --out")
     if states < 1:
         raise ConfigError(f"--states {states}: must be >= 1")
+    if fit_steps < 1:
+        raise ConfigError(f"--fit-steps {fit_steps}: must be >= 1 (an unfitted student is noise)")
+    check_seed(seed)
+    for source in policies:  # before the folder: a wrong --policy leaves nothing behind
+        if source not in BUILTIN:
+            if Path(source).exists():
+                run_meta(Path(source))
+            else:
+                load_policy(source)
     cfg = cfg.with_overrides(pare={"advisor": teacher, "mode": "student"})
     advice = build_pirl_advice(cfg, probe=True, seed=seed)
     advisor, student, dataset = advice.advisor, advice.student, advice.dataset
@@ -115,6 +127,7 @@ def distill(
         else:
             stale.unlink()
     started = time.perf_counter()
+    ok_to_keep = False
     try:
         prompts, views, feats = collect_states(cfg, advisor, policies, states, seed)
         asked = ok = 0
@@ -135,8 +148,12 @@ def distill(
                 )
         student.pull(dataset)
         score = student.fit(fit_steps)
+        ok_to_keep = True
     finally:
         advisor.close()
+        if not ok_to_keep:  # a failed distill leaves no half-made student folder
+            release_folder(tmp)
+            shutil.rmtree(tmp, ignore_errors=True)
     record = {
         "label": f"student of {advisor.label}",
         "teacher": student.teacher,
@@ -155,7 +172,7 @@ def distill(
         "prompt_variant": cfg.pare.prompt_variant,
         "seconds": round(time.perf_counter() - started, 1),
     }
-    student.save(tmp / "student.pt")
+    student.save(tmp / STUDENT_FILE)
     (tmp / "student.json").write_text(json.dumps(record, indent=2))
     os.replace(tmp, out)
     release_folder(tmp)

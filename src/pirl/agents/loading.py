@@ -121,10 +121,7 @@ class PPOPolicy(LearnedPolicy):
             from stable_baselines3 import PPO
 
         self.masked = masked
-        try:
-            self.model = PPO.load(model_path, device=device)
-        except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
-            raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+        self.model = load_sb3(model_path, PPO, device)
         self.obs_size = int(self.model.observation_space.shape[0])
         self.name = name
         self.label = label(name)
@@ -252,14 +249,120 @@ def load_policy(
 
 def load_model(path: Path, device: str = "cpu") -> Any:
     """The SB3 model in ``path`` (a run's model.zip): ``MaskablePPO`` when its run trained
-    with action masks, else ``PPO``."""
+    with action masks, else ``PPO``; loaded by :func:`load_sb3` (nothing unpickled)."""
     from stable_baselines3 import PPO
 
+    algo: Any = PPO
     if run_masked(Path(path).parent):
         from sb3_contrib import MaskablePPO
 
-        return MaskablePPO.load(path, device=device)
-    return PPO.load(path, device=device)
+        algo = MaskablePPO
+    return load_sb3(path, algo, device)
+
+
+# What SB3 (and this package) write into model.zip's cloudpickled entries, by the globals a
+# pickle names: anything else there (os.system, builtins.exec, code objects) is a tampered
+# file and is refused, although no entry is ever unpickled.
+SB3_GLOBALS = frozenset(
+    {
+        "collections.deque",
+        "collections.OrderedDict",
+        "gymnasium.spaces.box.Box",
+        "gymnasium.spaces.discrete.Discrete",
+        "numpy.dtype",
+        "numpy.ndarray",
+        "numpy.core.numeric._frombuffer",
+        "numpy._core.numeric._frombuffer",
+        "numpy.core.multiarray.scalar",
+        "numpy._core.multiarray.scalar",
+        "numpy.core.multiarray._reconstruct",
+        "numpy._core.multiarray._reconstruct",
+        "numpy.random._pickle.__generator_ctor",
+        "numpy.random._pickle.__bit_generator_ctor",
+        "stable_baselines3.common.utils.FloatSchedule",
+        "stable_baselines3.common.utils.ConstantSchedule",
+        "stable_baselines3.common.utils.LinearSchedule",
+        "stable_baselines3.common.policies.ActorCriticPolicy",
+        "stable_baselines3.common.buffers.RolloutBuffer",
+        "sb3_contrib.common.maskable.policies.MaskableActorCriticPolicy",
+        "sb3_contrib.common.maskable.buffers.MaskableRolloutBuffer",
+        "pirl.agents.schedules.LinearDecay",
+    }
+)
+
+
+def sb3_entries(path: Path) -> dict[str, Any]:
+    """The ``data`` entries of an SB3 zip, read as JSON; every cloudpickled entry is looked
+    into (not loaded) and one naming anything outside :data:`SB3_GLOBALS` is refused."""
+    import base64
+    import binascii
+
+    from pirl.config.safe_state import UnsafeFile, pickle_globals
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as exc:
+        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+    if not isinstance(data, dict):
+        raise UserError(f"{path} cannot be loaded (its data entry is not a mapping); {_RETRAIN}")
+    for key, value in data.items():
+        if not (isinstance(value, dict) and ":serialized:" in value):
+            continue
+        try:
+            raw = base64.b64decode(value[":serialized:"])
+        except (binascii.Error, TypeError, ValueError):
+            raw = b""
+        strange = sorted(pickle_globals(raw) - SB3_GLOBALS)
+        if strange:
+            raise UnsafeFile(
+                f"refused {path}: its entry {key!r} would run code when loaded (it names "
+                f"{', '.join(strange[:3])}); pirl never unpickles a run's files, and a "
+                "model.zip written by pirl names none of these: do not use this run"
+            )
+    return data
+
+
+def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:
+    """An SB3 model from its zip without unpickling anything.
+
+    The weights come from the zip's ``.pth`` members (SB3 reads them with
+    ``torch.load(weights_only=True)``); every cloudpickled entry (spaces, schedules, buffers)
+    is checked by :func:`sb3_entries` and then replaced by one rebuilt from the run's own
+    ``config.yaml`` (the folder the zip is in), so none is ever unpickled.
+    """
+    import gymnasium as gym
+
+    from pirl.agents.schedules import learning_rate_of
+    from pirl.config.run import RunConfig
+    from pirl.env.observation import obs_size_for
+    from pirl.world.dynamics import N_ACTIONS
+
+    path = Path(path)
+    data = sb3_entries(path)
+    cfg_path = path.parent / "config.yaml"
+    try:
+        cfg = RunConfig.from_yaml(cfg_path)
+    except ConfigError as exc:
+        raise UserError(f"{path} cannot be loaded: its run's {exc}; {_RETRAIN}") from None
+    policy = algo.policy_aliases["MlpPolicy"]
+    rebuilt: dict[str, Any] = {
+        "policy_class": policy,
+        "observation_space": gym.spaces.Box(0.0, 1.0, (obs_size_for(cfg.env),), dtype=np.float32),
+        "action_space": gym.spaces.Discrete(N_ACTIONS),
+        "learning_rate": learning_rate_of(cfg.ppo),
+        "lr_schedule": learning_rate_of(cfg.ppo),
+        "clip_range": cfg.ppo.clip_range,
+    }
+    custom = {
+        key: rebuilt.get(key)
+        for key, value in data.items()
+        if isinstance(value, dict) and ":serialized:" in value
+    }
+    try:
+        return algo.load(path, device=device, custom_objects=custom)
+    except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
+        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
 
 
 def run_masked(run: Path) -> bool:

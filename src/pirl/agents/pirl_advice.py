@@ -162,18 +162,26 @@ def make_student(
     cfg: RunConfig, advisor: Any, env_cfg: Any, student_path: Path | None, seed: int = 0
 ) -> tuple[Any, Any]:
     """A new student of ``advisor`` (or the one saved at ``student_path``) and its dataset."""
-    from pirl.advice.student import N_EXTRA, Student, TeacherDataset, teacher_key
+    from pirl.advice.student import (
+        N_EXTRA,
+        STUDENT_FILE,
+        Student,
+        TeacherDataset,
+        teacher_key,
+    )
     from pirl.env.observation import obs_size_for
 
     dataset = TeacherDataset(dataset_path(cfg))
     key = teacher_key(advisor, cfg.pare.prompt_variant, env_cfg)
     if student_path is not None:
         path = Path(student_path)
-        file = path / "student.pt" if path.is_dir() else path
+        file = path / STUDENT_FILE if path.is_dir() else path
         if not file.is_file():
-            raise UserError(f"--student {path}: no student.pt (make one with pirl distill)")
+            raise UserError(f"--student {path}: no {STUDENT_FILE} (make one with pirl distill)")
         try:
             student = Student.load(file, dataset)
+        except UserError:
+            raise
         except (ValueError, OSError, RuntimeError, KeyError) as exc:
             raise UserError(f"--student {file} cannot be loaded: {exc}") from None
         if student.teacher != key:

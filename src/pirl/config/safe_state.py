@@ -177,6 +177,14 @@ def load(path: str | os.PathLike[str]) -> Any:
     if head[:1] == b"\x80":
         raise refuse_pickle(path)
     try:
+        with zipfile.ZipFile(path) as members:
+            if any(n.endswith((".pkl", ".pickle")) for n in members.namelist()):
+                raise refuse_pickle(path, "a pickle inside a zip, as torch.save writes")
+    except zipfile.BadZipFile:
+        raise ValueError(f"{path} is damaged (not an archive)") from None
+    except OSError as exc:
+        raise ValueError(f"{path} cannot be read ({type(exc).__name__})") from None
+    try:
         with np.load(path, allow_pickle=False) as archive:
             raw = bytes(archive[_STRUCTURE].tobytes())
             document = json.loads(raw.decode())
