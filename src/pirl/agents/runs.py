@@ -22,14 +22,19 @@ from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 
 
-def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]]) -> None:
-    """Draw one scenario per size now: an impossible obstacle layout is refused before any
-    folder is made (not by a worker, after)."""
+def check_layouts(
+    env: VCPPConfig, sizes: Iterable[tuple[int, int, int]], worlds: int = 1
+) -> None:
+    """Before any folder is made (not by a worker, after): ``worlds`` worlds of each size must
+    fit in memory (:func:`pirl.world.memory.check_memory`), and one scenario is drawn per
+    size, so an impossible obstacle layout is refused."""
     import numpy as np
 
+    from pirl.world.memory import check_memory
     from pirl.world.state import draw_scenario
 
     for size in sizes:
+        check_memory(env.replace(size=tuple(size)), worlds)
         draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
 
 
@@ -136,7 +141,7 @@ def train_run(
         cfg = cfg.with_overrides(pare={"advisor": advisor})
     if entry.advised:
         advisor_kind(cfg.pare.advisor).check_key(cfg)
-    check_layouts(cfg.env, [cfg.env.size])
+    check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
     if entry.training == TRAIN_IMITATION:
         from pirl.agents.imitation import train_il
 

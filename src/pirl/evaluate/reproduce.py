@@ -472,7 +472,8 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
     check_workers(workers)
     plan_runs(cfg, advisor)
     rp = cfg.reproduce
-    check_layouts(cfg.env, [cfg.env.size, *map(parse_size, rp.sizes + rp.physics_sizes)])
+    check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
+    check_layouts(cfg.env, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
 
 
 def reproduce(

@@ -518,7 +518,7 @@ def evaluate_runs(
         advisor_kind(advisor).check_key(cfg)
     specs += [spec_for_builtin(m, advisor) for m in builtins]
     size_list = [parse_size(s) for s in sizes]
-    check_layouts(cfg.env, size_list)
+    check_layouts(cfg.env, size_list, episodes)  # batched: a chunk of worlds per worker
     plan = EvalPlan(
         specs=specs,
         sizes=size_list,
