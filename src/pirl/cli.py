@@ -521,6 +521,7 @@ def advise(
     from pirl.advice.health import check_advisor
     from pirl.config.run import RunConfig
 
+    check_seed(seed)
     cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
     kind = advisor_kind(advisor)
     if base_url is None:
@@ -542,7 +543,15 @@ def advise(
     )
     answer, prompt, loaded = check.answer, check.prompt, check.setup_s
     console.rule(f"answer from {check.label}")
-    console.print(answer.text or "(no text)", markup=False, highlight=False)
+    if answer.cut:
+        console.print(answer.text[:300], markup=False, highlight=False)
+        console.print(
+            f"(reply of {answer.reply_chars:,} characters or bytes; only its head is kept, and "
+            "a reply that long counts as unparseable)",
+            markup=False,
+        )
+    else:
+        console.print(answer.text or "(no text)", markup=False, highlight=False)
     console.rule("result")
     rec = answer.recommendation
     console.print(f"parsed:      {rec if rec is not None else 'could not parse'}", markup=False)

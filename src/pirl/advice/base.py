@@ -9,7 +9,11 @@ from typing import Any
 
 from pirl.advice.recommendation import Recommendation
 
-__all__ = ["Answer", "Advisor", "error_answer"]
+__all__ = ["MAX_ANSWER_CHARS", "Answer", "Advisor", "error_answer"]
+
+MAX_ANSWER_CHARS = 1024
+"""Longest reply kept: a recommendation is one short line (requests ask for at most
+``advisor.max_tokens`` tokens), so anything longer is a misbehaving model or server."""
 
 
 @dataclass(frozen=True)
@@ -24,6 +28,11 @@ class Answer:
         completion_tokens: tokens written (0 when unknown or cached).
         from_cache: whether it came from a persistent cache.
         error: why the call failed, or ``None``.
+        reply_chars: the length of the whole reply when ``text`` is only its head (a reply
+            longer than :data:`MAX_ANSWER_CHARS`, or a body cut at read time); 0 otherwise.
+
+    A reply longer than :data:`MAX_ANSWER_CHARS` keeps only its head and counts as
+    unparseable, whoever made it: no cache, checkpoint or console ever holds it whole.
     """
 
     text: str
@@ -33,6 +42,20 @@ class Answer:
     completion_tokens: int = 0
     from_cache: bool = False
     error: str | None = None
+    reply_chars: int = 0
+
+    def __post_init__(self) -> None:
+        if len(self.text) > MAX_ANSWER_CHARS:
+            # Frozen: the dataclass refuses plain assignment.
+            object.__setattr__(self, "reply_chars", max(self.reply_chars, len(self.text)))
+            object.__setattr__(self, "text", self.text[:MAX_ANSWER_CHARS])
+        if self.reply_chars:
+            object.__setattr__(self, "recommendation", None)
+
+    @property
+    def cut(self) -> bool:
+        """Whether the reply was too long and only its head is kept."""
+        return self.reply_chars > 0
 
     @property
     def ok(self) -> bool:

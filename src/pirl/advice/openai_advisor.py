@@ -17,6 +17,11 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import urlparse
 
+try:  # the HTTP library the openai SDK is built on: httpx2 in its newer releases
+    import httpx2 as httpx
+except ImportError:  # pragma: no cover - older openai releases use httpx
+    import httpx  # type: ignore[no-redef]
+
 from pirl.advice.base import NO_ANSWER, Advisor, Answer, error_answer
 from pirl.advice.parser import parse_recommendation
 
@@ -113,7 +118,13 @@ class OpenAIAdvisor(Advisor):
                 )
             key = NO_KEY
         return openai.OpenAI(
-            api_key=key, base_url=self.base_url, timeout=self.timeout_s, max_retries=0
+            api_key=key,
+            base_url=self.base_url,
+            timeout=self.timeout_s,
+            max_retries=0,
+            http_client=httpx.Client(
+                transport=_CappedTransport(MAX_REPLY_BYTES), timeout=self.timeout_s
+            ),
         )
 
     @property
@@ -187,6 +198,14 @@ class OpenAIAdvisor(Advisor):
                 )
                 break
             except Exception as exc:  # noqa: BLE001 - classified below, never raised
+                big = _too_large(exc)
+                if big is not None:  # counted as unparseable, never kept whole
+                    return Answer(
+                        text=big.head,
+                        recommendation=None,
+                        latency_s=time.perf_counter() - started,
+                        reply_chars=big.size,
+                    )
                 retryable = isinstance(
                     exc,
                     openai.RateLimitError | openai.APIConnectionError | openai.InternalServerError,
@@ -242,6 +261,75 @@ class OpenAIAdvisor(Advisor):
 
     def __repr__(self) -> str:
         return f"OpenAIAdvisor(model={self.model!r}, base_url={self.base_url!r})"
+
+
+MAX_REPLY_BYTES = 256 * 1024
+"""Largest response body read from a server; the body of a longer one is cut at read time
+(a chat completion of ``max_tokens`` tokens is a few kilobytes)."""
+_COUNT_BEYOND = 64 * MAX_REPLY_BYTES  # how far the size of a cut body is still counted
+
+
+class ReplyTooLarge(Exception):
+    """A response body over :data:`MAX_REPLY_BYTES`: its head and its size (bytes, counted up
+    to a bound) are kept, the rest is dropped as it arrives."""
+
+    def __init__(self, head: str, size: int) -> None:
+        super().__init__(f"reply of {size} bytes or more, over {MAX_REPLY_BYTES}")
+        self.head, self.size = head, size
+
+
+def _too_large(exc: BaseException | None) -> ReplyTooLarge | None:
+    """The :class:`ReplyTooLarge` behind an SDK error (the SDK wraps transport errors)."""
+    seen = 0
+    while exc is not None and seen < 8:
+        if isinstance(exc, ReplyTooLarge):
+            return exc
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return None
+
+
+class _CappedStream(httpx.SyncByteStream):
+    """A response body that stops at ``limit`` bytes (then raises :class:`ReplyTooLarge`)."""
+
+    def __init__(self, inner: Any, limit: int) -> None:
+        self.inner, self.limit = inner, limit
+
+    def __iter__(self) -> Any:
+        seen, head = 0, b""
+        for chunk in self.inner:
+            seen += len(chunk)
+            if len(head) < 400:
+                head += chunk[: 400 - len(head)]
+            if seen > self.limit:
+                for more in self.inner:
+                    seen += len(more)
+                    if seen > _COUNT_BEYOND:
+                        break
+                raise ReplyTooLarge(head.decode(errors="replace"), seen)
+            yield chunk
+
+    def close(self) -> None:
+        close = getattr(self.inner, "close", None)
+        if close is not None:
+            close()
+
+
+class _CappedTransport(httpx.HTTPTransport):
+    """httpx's transport with every response body capped (:class:`_CappedStream`)."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit = limit
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        response = super().handle_request(request)
+        return httpx.Response(
+            status_code=response.status_code,
+            headers=response.headers,
+            stream=_CappedStream(response.stream, self.limit),
+            extensions=response.extensions,
+            request=request,
+        )
 
 
 _KEY_LIKE = re.compile(r"\b(sk|key|token)[-_][A-Za-z0-9_\-*]{6,}", re.IGNORECASE)
