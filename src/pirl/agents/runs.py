@@ -22,9 +22,7 @@ from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 
 
-def check_layouts(
-    env: VCPPConfig, sizes: Iterable[tuple[int, int, int]], worlds: int = 1
-) -> None:
+def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]], worlds: int = 1) -> None:
     """Before any folder is made (not by a worker, after): ``worlds`` worlds of each size must
     fit in memory (:func:`pirl.world.memory.check_memory`), and one scenario is drawn per
     size, so an impossible obstacle layout is refused."""

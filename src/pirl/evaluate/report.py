@@ -211,8 +211,15 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
     runs = {
         name: s for name, s in (advisor_stats or {}).items() if isinstance(s, dict) and "steps" in s
     }
+    damaged = sorted(
+        (name, s["damaged"])
+        for name, s in (advisor_stats or {}).items()
+        if isinstance(s, dict) and "damaged" in s
+    )
+    missing = [f"Stats missing for run {name}: {why}." for name, why in damaged]
     if not runs:
-        return ""
+        head = ["### How much advice shaped each PIRL run (training)", ""]
+        return "\n".join([*head, *missing]) + "\n" if missing else ""
     lines = [
         "### How much advice shaped each PIRL run (training)",
         "",
@@ -240,6 +247,8 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
             f"{s.get('mean_staleness', 0.0):.1f} | {s.get('teacher_calls_per_step', 0.0):.4f} | "
             f"{agreement} | {spent if spent >= 0 else 'not spent'} |"
         )
+    if missing:
+        lines += ["", *missing]
     return "\n".join(lines) + "\n"
 
 

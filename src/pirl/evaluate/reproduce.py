@@ -527,7 +527,7 @@ def reproduce(
             plan, out / "eval", workers or rp.workers, progress=progress, ray_address=ray_address
         )
         gifs = dict(job.result() for job in gif_jobs)
-    stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl")
+    stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl", log)
     notes = [
         f"Profile values: {rp.episodes} scenarios per size ({rp.llm_only_episodes} for "
         f"LLM-only), training seeds {list(rp.seeds)}, {steps_text(cfg)} per PPO run; "
@@ -580,12 +580,26 @@ def settings_line(cfg: RunConfig) -> str:
     return f"Agents: {masks}; {seen}{starts} (docs/deviations.md)."
 
 
-def _advisor_stats(runs: list[Path], episodes: Path) -> dict[str, Any]:
+def _advisor_stats(
+    runs: list[Path], episodes: Path, log: Callable[[str], None] = print
+) -> dict[str, Any]:
+    """Each run's ``advisor_stats.json`` by run name (a damaged one is named in one line and
+    recorded as ``{"damaged": reason}``, so the report still comes out and says so), and the
+    LLM-only evaluation's calls."""
     stats: dict[str, Any] = {}
     for run in runs:
         path = run / "advisor_stats.json"
         if path.is_file():
-            stats[run.name] = {**json.loads(path.read_text()), "source": str(run)}
+            try:
+                found = json.loads(path.read_text())
+                if not isinstance(found, dict):
+                    raise ValueError("not a JSON object")
+            except (OSError, ValueError) as exc:
+                reason = f"{path} is damaged ({type(exc).__name__})"
+                log(f"warning: {reason}; the report's advice table leaves this run out")
+                stats[run.name] = {"damaged": reason, "source": str(run)}
+                continue
+            stats[run.name] = {**found, "source": str(run)}
     calls = 0
     if episodes.is_file():
         for line in episodes.open():
