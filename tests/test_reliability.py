@@ -135,7 +135,7 @@ def test_truncated_latest_checkpoint_falls_back_to_the_previous_one(runs, tmp_pa
     (run / "meta.json").write_text(json.dumps({**meta, "complete": False}))
     ckpts = run / "checkpoints"
     latest = checkpoint.latest(ckpts)
-    state = latest / "state.pkl"
+    state = latest / "state.npz"
     state.write_bytes(state.read_bytes()[: state.stat().st_size // 2])
     found = checkpoint.load_latest(ckpts)
     assert found is not None and found[0] != latest

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from pathlib import Path
@@ -145,6 +146,7 @@ class TabNetPolicy(LearnedPolicy):
         self.name, self.label = name, label(name)
         self.masked = masked
         self.model = TabNetClassifier(device_name="cpu")
+        check_tabnet_file(model_path)
         try:
             self.model.load_model(str(model_path))
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
@@ -162,6 +164,29 @@ class TabNetPolicy(LearnedPolicy):
         return full
 
 
+def check_tabnet_file(path: Path) -> None:
+    """Refuse a ``tabnet.zip`` whose weights (a ``torch.save`` pickle) name anything but
+    PyTorch's tensor builders: PyTorch reads them with ``weights_only=True`` by default, and
+    this keeps such a file refused even where that default is switched off."""
+    from pirl.config.safe_state import UnsafeFile, pickle_globals
+
+    try:
+        with zipfile.ZipFile(path) as outer, outer.open("network.pt") as inner:
+            blob = io.BytesIO(inner.read())
+        with zipfile.ZipFile(blob) as weights:
+            pickles = [n for n in weights.namelist() if n.endswith(".pkl")]
+            names = set().union(*(pickle_globals(weights.read(n)) for n in pickles))
+    except (zipfile.BadZipFile, KeyError, OSError) as exc:
+        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+    strange = sorted(n for n in names if not n.startswith("torch.") and n != _ORDERED_DICT)
+    if strange:
+        raise UnsafeFile(
+            f"refused {path}: its network.pt would run code when loaded (it names "
+            f"{', '.join(strange[:3])}); do not use this run"
+        )
+
+
+_ORDERED_DICT = "collections.OrderedDict"
 _RETRAIN = "train the run again into a new --out (or restore the file from a copy)"
 
 
