@@ -111,6 +111,21 @@ def test_every_preset_loads(preset):
 
 
 def test_a_checkpoint_from_before_the_named_world_state_is_refused_in_one_line(tmp_path):
+    from pirl.agents import checkpoint
+    from pirl.config import safe_state
+
+    step = tmp_path / "step_64"
+    step.mkdir()
+    (step / "model.zip").write_bytes(b"")
+    safe_state.save(
+        {"num_timesteps": 64, "world": {}, "weights": None, "rngs": []}, step / "state.npz"
+    )
+    (tmp_path / "LATEST").write_text("step_64")
+    with pytest.raises(ConfigError, match="older pirl"):
+        checkpoint.load_latest(tmp_path)
+
+
+def test_a_pickled_checkpoint_is_refused_unread(tmp_path):
     import pickle
 
     from pirl.agents import checkpoint
@@ -118,8 +133,7 @@ def test_a_checkpoint_from_before_the_named_world_state_is_refused_in_one_line(t
     step = tmp_path / "step_64"
     step.mkdir()
     (step / "model.zip").write_bytes(b"")
-    with open(step / "state.pkl", "wb") as fh:
-        pickle.dump({"num_timesteps": 64, "world": {}, "weights": None, "rngs": []}, fh)
+    (step / "state.pkl").write_bytes(pickle.dumps({"num_timesteps": 64}))
     (tmp_path / "LATEST").write_text("step_64")
-    with pytest.raises(ConfigError, match="older pirl"):
+    with pytest.raises(ConfigError, match="state.pkl .a checkpoint.: it is a pickle"):
         checkpoint.load_latest(tmp_path)

@@ -112,8 +112,10 @@ def test_train_run_refuses_before_it_makes_a_folder(tmp_path):
     out = tmp_path / "run"
     with pytest.raises(ConfigError, match="--method il needs --expert"):
         train_run("il", out, TEST_CFG, TEST_CFG)
-    with pytest.raises(ConfigError, match="--student needs --method pirl with pare.mode student"):
+    with pytest.raises(ConfigError, match="--student is not an option of --method ppo-sr"):
         train_run("ppo-sr", out, TEST_CFG, TEST_CFG, student=tmp_path)
+    with pytest.raises(ConfigError, match="--student needs --method pirl with pare.mode student"):
+        train_run("pirl", out, TEST_CFG, TEST_CFG, student=tmp_path)
     with pytest.raises(ConfigError, match="unknown advisor 'gpt9'"):
         train_run("pirl", out, TEST_CFG, TEST_CFG, advisor="gpt9")
     with pytest.raises(ConfigError, match="'random' is not trained"):

@@ -100,19 +100,25 @@ def _plant_in_zip(model: Path, key: str, marker: Path) -> None:
 
 # -- 1. nothing in a run folder, checkpoint or student runs code ------------------------------
 def test_a_payload_in_any_serialized_entry_of_model_zip_is_refused(runs, tmp_path):
+    from pirl.agents.loading import load_policy
+
     keys = _serialized_keys(runs["done"] / "model.zip")
     assert {"lr_schedule", "observation_space", "action_space", "policy_class"} <= set(keys)
     for key in keys:
         run = _copy(runs["done"], tmp_path / f"evil-{key}")
         marker = tmp_path / f"marker-{key}"
         _plant_in_zip(run / "model.zip", key, marker)
-        proc = _pirl(
-            "evaluate", "--runs", str(run), "--sizes", "15", "--episodes", "1",
-            "--out", str(tmp_path / f"eval-{key}"), cwd=tmp_path,
-        )  # fmt: skip
-        _one_line(proc, "refused", str(run / "model.zip"), repr(key))
+        with pytest.raises(safe_state.UnsafeFile, match=f"entry {key!r} would run code"):
+            load_policy(run)
         assert not marker.exists(), key
-        assert not (tmp_path / f"eval-{key}").exists()
+    # The probe's command, as it was run: one line, exit 2, no marker, no results folder.
+    run, marker = tmp_path / "evil-lr_schedule", tmp_path / "marker-lr_schedule"
+    proc = _pirl(
+        "evaluate", "--runs", str(run), "--sizes", "15", "--episodes", "1",
+        "--out", str(tmp_path / "eval"), cwd=tmp_path,
+    )  # fmt: skip
+    _one_line(proc, "refused", str(run / "model.zip"), "'lr_schedule'")
+    assert not marker.exists() and not (tmp_path / "eval").exists()
 
 
 def test_a_clean_run_loads_and_plays_without_unpickling(runs, tmp_path, monkeypatch):
