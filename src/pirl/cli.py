@@ -516,14 +516,35 @@ def advise(
     model: Annotated[str | None, typer.Option(help="openai model, or local model folder.")] = None,
     base_url: Annotated[str | None, typer.Option(help="OpenAI-compatible server URL.")] = None,
     cache: Annotated[bool, typer.Option(help="Use the persistent answer cache.")] = True,
+    score: Annotated[
+        int | None,
+        typer.Option(
+            help="Score the advisor against the oracle on N validation states (agreement, "
+            "kappa, alignment, latency, tokens, the price of a run)."
+        ),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="--score: write the score as JSON.")] = None,
+    price_in: Annotated[
+        float | None, typer.Option(help="--score: price per million prompt tokens.")
+    ] = None,
+    price_out: Annotated[
+        float | None, typer.Option(help="--score: price per million completion tokens.")
+    ] = None,
+    profile: Annotated[
+        str, typer.Option(help="--score: the profile whose PIRL run is priced.")
+    ] = "quick",
 ) -> None:
-    """Ask the advisor about one scenario's first state: the check to run first on a new LLM."""
+    """Ask the advisor about one scenario's first state: the check to run first on a new LLM.
+    With --score N: how good its advice is, scored against the oracle, and what a run costs."""
     from pirl.advice.health import check_advisor
     from pirl.config.run import RunConfig
 
     check_seed(seed)
-    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
     kind = advisor_kind(advisor)
+    if config:
+        cfg = RunConfig.from_yaml(_preset(config, "--config"))
+    else:  # no config: the prompt this advisor suits (the embedded model: compact)
+        cfg = RunConfig().with_overrides(pare={"prompt_variant": kind.prompt_variant})
     if base_url is None:
         kind.check_key(cfg)
     changes: dict[str, Any] = {}
@@ -533,6 +554,9 @@ def advise(
         changes["openai_base_url"] = base_url
     if changes:
         cfg = cfg.with_overrides(advisor=changes)
+    if score is not None:
+        _score(cfg, advisor, score, out, price_in, price_out, profile, cache, seed)
+        return
 
     def show_prompt(prompt: str) -> None:
         console.rule("prompt")
@@ -570,6 +594,80 @@ def advise(
         )
     if rec is None or copied:
         raise typer.Exit(1)
+
+
+def _score(
+    cfg: Any,
+    name: str,
+    n: int,
+    out: Path | None,
+    price_in: float | None,
+    price_out: float | None,
+    profile: str,
+    cache: bool,
+    seed: int,
+) -> None:
+    """``pirl advise --score``: the advisor scored against the oracle, and the price of a run."""
+    import json
+
+    from rich.progress import Progress
+
+    from pirl.advice.factory import make_advisor
+    from pirl.config.run import RunConfig
+    from pirl.evaluate.advice_score import price_run, score_advisor
+
+    if n < 1:
+        raise ConfigError(f"--score {n}: ask about at least 1 state")
+    if out is not None and out.is_dir():
+        raise ConfigError(f"--out {out} is a folder; give the JSON file to write")
+    priced = RunConfig.from_yaml(_preset(profile, "--profile")).with_overrides(
+        pare={"advisor": name}
+    )
+    advisor = make_advisor(name, cfg, cache=cache)
+    try:
+        with Progress(console=console, transient=True) as bar:
+            task = bar.add_task("scoring", total=n)
+            result = score_advisor(
+                advisor, cfg, n, seed, progress=lambda d, t: bar.update(task, completed=d)
+            )
+    finally:
+        advisor.close()
+    price = price_run(priced, name, profile, result.tokens_in, result.tokens_out,
+                      price_in, price_out)  # fmt: skip
+    table = Table(title=f"{result.advisor} against the oracle on {result.states} states")
+    for col in ("measure", "value", "kappa"):
+        table.add_column(col)
+    rows = [
+        ("parse rate", result.parse_rate, None),
+        ("agreement: move", result.agreement_move, result.kappa_move),
+        ("agreement: position", result.agreement_position, result.kappa_position),
+        ("agreement: camera", result.agreement_camera, result.kappa_camera),
+        ("alignment (PARE pays)", result.alignment_mean, None),
+        ("alignment of the oracle", result.alignment_oracle, None),
+    ]
+    for label_, value, kappa in rows:
+        table.add_row(label_, f"{value:.3f}", "" if kappa is None else f"{kappa:.3f}")
+    console.print(table)
+    console.print(
+        f"latency p50 {result.latency_p50_s:.3f} s, p95 {result.latency_p95_s:.3f} s; tokens "
+        f"per answer {result.tokens_in:.0f} in, {result.tokens_out:.0f} out "
+        f"({result.tokens_counted_by})"
+    )
+    console.print(price.line(), markup=False)
+    if out is not None:
+        data = {**result.to_dict(), "price": dataclasses_asdict(price), "seed": seed,
+                "prompt_variant": cfg.pare.prompt_variant}  # fmt: skip
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_text(json.dumps(data, indent=2))
+        tmp.replace(out)
+        console.print(f"wrote {out}")
+
+
+def dataclasses_asdict(obj: Any) -> dict[str, Any]:
+    import dataclasses
+
+    return dataclasses.asdict(obj)
 
 
 def _copies_format_example(rec: Any, prompt: str) -> bool:

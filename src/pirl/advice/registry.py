@@ -79,6 +79,8 @@ class AdvisorKind:
     """Plan estimate: teacher answers per second in a teacher phase."""
     sync_batch_s: float = 0.0
     """Plan estimate: seconds per batch of answers that sync or async PARE waits for."""
+    prompt_variant: str = "paper"
+    """The prompt it suits, which ``pirl advise`` uses when no config says otherwise."""
 
 
 def _local(cfg: RunConfig) -> Advisor:
@@ -128,7 +130,7 @@ def _openai_key(cfg: RunConfig) -> None:
 def _oracle(cfg: RunConfig) -> Advisor:
     from pirl.advice.oracle import OracleAdvisor
 
-    return OracleAdvisor()
+    return OracleAdvisor(cfg.advisor.oracle_accuracy)
 
 
 # Rates: issue 18's demo (student mode: oracle 60 s, embedded LLM 127 s beside PPO's 45 s;
@@ -146,6 +148,7 @@ BUILTIN: dict[str, AdvisorKind] = {
             model_setting="local_model",
             answers_per_s=1.2,
             sync_batch_s=20.0,
+            prompt_variant="compact",  # the 135M model copies the paper prompt's example
         ),
         AdvisorKind(
             "openai",

@@ -31,7 +31,7 @@ import sqlite3
 import time
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,21 @@ FEATURE_VERSION = 1
 """Bumped when the features change, so old dataset rows are not mixed with new ones."""
 MIN_HELDOUT = 20
 """Fewest held-out answers before the student's agreement is trusted (and the gate can open)."""
+CONSTANT_SHARE = 0.9
+"""A field is uninformative when one value takes more than this share of the held-out answers:
+matching it says nothing about the state."""
+
+
+def cohen_kappa(pred: np.ndarray, truth: np.ndarray, n_classes: int) -> float:
+    """Cohen's kappa of two label vectors: (agreement - chance) / (1 - chance), with chance
+    the agreement their label frequencies give at random; 0 when chance is 1."""
+    if not len(truth):
+        return 0.0
+    observed = float((pred == truth).mean())
+    p_pred = np.bincount(pred, minlength=n_classes) / len(pred)
+    p_true = np.bincount(truth, minlength=n_classes) / len(truth)
+    chance = float((p_pred * p_true).sum())
+    return 0.0 if chance >= 1.0 - 1e-12 else (observed - chance) / (1.0 - chance)
 
 
 def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) -> np.ndarray:
@@ -268,6 +283,15 @@ class StudentScore:
     """Held-out answers scored."""
     per_field: dict[str, float]
     """Exact-match accuracy of each field."""
+    kappa: float = 0.0
+    """Cohen's kappa of the student against the teacher (agreement beyond what their answer
+    frequencies give by chance), averaged over the informative fields; 0 when none is."""
+    per_field_kappa: dict[str, float] = field(default_factory=dict)
+    """Cohen's kappa of each field (0 for a field the teacher hardly varies)."""
+    informative: tuple[str, ...] = ()
+    """The fields on which both the teacher's held-out answers and the student's predictions
+    vary (no single value takes more than :data:`CONSTANT_SHARE` of either). None: what the
+    student learned carries no state information."""
 
 
 class Student:
@@ -363,17 +387,35 @@ class Student:
         pred = self.predict_labels(self._x[held])
         truth = self._y[held]
         per_field = {f: float((pred[:, k] == truth[:, k]).mean()) for k, f in enumerate(FIELDS)}
-        majority = []
-        for k in range(len(FIELDS)):
-            common = np.bincount(self._y[train, k], minlength=len(CLASSES[k])).argmax()
+        majority, kappas, informative = [], {}, []
+        for k, name in enumerate(FIELDS):
+            n = len(CLASSES[k])
+            common = np.bincount(self._y[train, k], minlength=n).argmax()
             majority.append(float((truth[:, k] == common).mean()))
+            # Informative: the teacher varies and so does the student. A field the teacher's
+            # noise makes vary while the student, rightly, keeps to one value says nothing of
+            # the signal either way, and would dilute the mean.
+            top = np.bincount(truth[:, k], minlength=n).max() / len(truth)
+            top_pred = np.bincount(pred[:, k], minlength=n).max() / len(pred)
+            varies = top <= CONSTANT_SHARE and top_pred <= CONSTANT_SHARE
+            kappas[name] = cohen_kappa(pred[:, k], truth[:, k], n) if varies else 0.0
+            if varies:
+                informative.append(name)
+        kappa = float(np.mean([kappas[f] for f in informative])) if informative else 0.0
         return StudentScore(
-            float(np.mean(list(per_field.values()))), float(np.mean(majority)), len(held), per_field
-        )
+            float(np.mean(list(per_field.values()))), float(np.mean(majority)), len(held),
+            per_field, kappa, kappas, tuple(informative),
+        )  # fmt: skip
 
-    def passes(self, gate: float) -> bool:
-        """Whether the held-out agreement has reached ``gate`` on enough held-out answers."""
-        return self.score.heldout >= MIN_HELDOUT and self.score.agreement >= gate
+    def passes(self, gate: float, on: str = "agreement") -> bool:
+        """Whether the student may shape rewards: enough held-out answers and, ``on``
+        ``"kappa"``, a kappa of at least ``gate`` over informative fields (what the student
+        learned of the teacher's signal), or ``on`` ``"agreement"``, a held-out agreement of at
+        least ``gate`` (which a noisy teacher cannot reach and a constant one passes)."""
+        if self.score.heldout < MIN_HELDOUT:
+            return False
+        value = self.score.kappa if on == "kappa" else self.score.agreement
+        return value >= gate
 
     # -- advice -----------------------------------------------------------------------------
     @torch.no_grad()

@@ -140,10 +140,17 @@ def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> s
     if stats.get("mode") == "student":
         passed = int(stats.get("gate_passed_at_step", -1))
         if passed < 0:
+            kappa = float(stats.get("student_kappa", 0.0))
+            informative = stats.get("student_informative") or []
+            signal = (
+                f"kappa {kappa:.2f} over {', '.join(informative)}"
+                if informative
+                else "the teacher's answers carry no state information (no field varies)"
+            )
             why.append(
-                f"student gate never passed (agreement {stats.get('student_agreement', 0):.2f} "
-                f"vs gate {gate:g} on {int(stats.get('student_heldout', 0))} held-out answers; "
-                f"it needs {MIN_HELDOUT})"
+                f"student gate never passed (agreement {stats.get('student_agreement', 0):.2f}, "
+                f"{signal}; gate {gate:g} on {int(stats.get('student_heldout', 0))} held-out "
+                f"answers; it needs {MIN_HELDOUT})"
             )
         else:
             why.append(f"student gate passed at step {passed:,} of {int(stats['steps']):,}")

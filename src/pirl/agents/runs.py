@@ -94,7 +94,7 @@ def train_one(
     else:
         overrides = {**(pare or {}), **({"advisor": adv} if adv else {})}
         run_cfg = method_config(cfg, method)
-        run_cfg = run_cfg.with_overrides(pare=overrides) if overrides else run_cfg
+        run_cfg = run_cfg.with_variant(overrides) if overrides else run_cfg
         train(method, run_cfg, run, seed=seed, resume=resume, show_progress=show_progress)
 
 

@@ -46,7 +46,7 @@ class TeacherPhase:
 def needs_head_start(cfg: RunConfig, pare: dict[str, Any]) -> bool:
     """Whether a PIRL variant's teacher is an LLM (slower than the oracle) and the run learns
     from a student (the only mode whose shaping waits for teacher answers to pile up)."""
-    merged = cfg.with_overrides(pare=pare).pare
+    merged = cfg.with_variant(pare).pare
     return merged.mode == "student" and advisor_kind(merged.advisor).llm
 
 
@@ -56,7 +56,7 @@ def phase_of(cfg: RunConfig, pare: dict[str, Any]) -> TeacherPhase | None:
     answers = cfg.reproduce.teacher_phase_answers
     if answers <= 0 or not needs_head_start(cfg, pare):
         return None
-    merged = cfg.with_overrides(pare=pare).pare
+    merged = cfg.with_variant(pare).pare
     keep = {"advisor": merged.advisor, "prompt_variant": merged.prompt_variant}
     return TeacherPhase(merged.advisor, tuple(sorted(keep.items())), answers)
 

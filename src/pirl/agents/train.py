@@ -459,7 +459,7 @@ def train(
         stats = _advisor_stats(stack.pare, advisor)
         write_json(out / "advisor_stats.json", stats)
         # A mostly unshaped PIRL run is PPO-EWRI under PIRL's name: say so, and why.
-        warning = unshaped_warning(stats, cfg.pare.min_shaped, cfg.pare.student_gate)
+        warning = unshaped_warning(stats, cfg.pare.min_shaped, cfg.pare.gate()[0])
         if warning:
             _warn(warning)
     meta.update(complete=True, timesteps=int(model.num_timesteps))

@@ -8,10 +8,11 @@ field, loaded and checked by :mod:`pirl.config.load`.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from pirl.config.load import Settings, check_seed
+from pirl.config.load import Settings, check_keys, check_seed
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 
@@ -134,7 +135,16 @@ class PareSettings(Settings, section="pare"):
     oracle_teacher_rate: float = 0.02
     """Student mode: teacher calls per env-step when the teacher is the oracle (cheap)."""
     student_gate: float = 0.8
-    """Student mode: held-out agreement with the teacher before the student shapes rewards."""
+    """Student mode, ``student_gate_on: agreement``: held-out agreement with the teacher
+    before the student shapes rewards."""
+    student_gate_on: str = "kappa"
+    """Student mode: what opens the gate. 'kappa': the student's Cohen's kappa against the
+    teacher over the fields the teacher varies reaches student_kappa_gate (what the student
+    learned of the teacher's signal, so an imperfect teacher passes and a near-constant one
+    does not); 'agreement': raw held-out agreement reaches student_gate (a noisy teacher can
+    never pass it). Chosen on distillation states: docs/advice.md."""
+    student_kappa_gate: float = 0.2
+    """Student mode, ``student_gate_on: kappa``: the kappa that opens the gate."""
     student_fit_steps: int = 100
     """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
     student_refit_growth: float = 0.25
@@ -157,6 +167,12 @@ class PareSettings(Settings, section="pare"):
     teacher) ends with a warning, and its label in summaries, tables, figures and the report
     carries ``unshaped N%``: it trained mostly as PPO-EWRI."""
 
+    def gate(self) -> tuple[float, str]:
+        """The student's gate: (threshold, ``"kappa"`` or ``"agreement"``)."""
+        if self.student_gate_on == "kappa":
+            return self.student_kappa_gate, "kappa"
+        return self.student_gate, "agreement"
+
     def validate(self) -> None:
         """Positive intervals and sizes, known mode and prompt, shares in [0, 1]."""
         self.require_positive(
@@ -164,8 +180,10 @@ class PareSettings(Settings, section="pare"):
         )
         self.require_choice("mode", ("student", "sync", "async"))
         self.require_choice("prompt_variant", ("paper", "compact"))
+        self.require_choice("student_gate_on", ("kappa", "agreement"))
         for key in (
-            "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate", "min_shaped"
+            "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
+            "min_shaped", "student_kappa_gate",
         ):  # fmt: skip
             if not 0 <= getattr(self, key) <= 1:
                 raise self.refuse(key, "must be in [0, 1]")
@@ -205,10 +223,16 @@ class AdvisorSettings(Settings, section="advisor"):
     """Retries with backoff on rate limits and dropped connections."""
     openai_concurrency: int = 8
     """Requests in flight at once."""
+    oracle_accuracy: float = 1.0
+    """'oracle' only: the share of states whose answer is the oracle's own; the others get a
+    valid answer drawn uniformly, seeded by the prompt (a stand-in for an imperfect LLM:
+    docs/advice.md). 1.0 is the oracle itself."""
 
     def validate(self) -> None:
-        """Positive timeouts."""
+        """Positive timeouts, an accuracy in [0, 1]."""
         self.require_positive("openai_timeout_s", "openai_deadline_s", "probe_timeout_s")
+        if not 0.0 <= self.oracle_accuracy <= 1.0:
+            raise self.refuse("oracle_accuracy", "must be in [0, 1]")
 
 
 @dataclass(frozen=True)
@@ -262,8 +286,9 @@ class ReproduceSettings(Settings, section="reproduce"):
     builtins: tuple[str, ...] = ("llm-only", "boustrophedon", "random")
     """Methods evaluated without training."""
     pirl_variants: tuple[Any, ...] = ()
-    """PIRL configurations, each a mapping of pare overrides (e.g. {advisor: oracle, lam_cam:
-    4}); empty = one PIRL with the preset's pare section and --advisor."""
+    """PIRL configurations, each a mapping of pare (or advisor) overrides (e.g. {advisor:
+    oracle, lam_cam: 4, oracle_accuracy: 0.5}); empty = one PIRL with the preset's pare
+    section and --advisor."""
     acts: tuple[str, ...] = ("stochastic", "greedy")
     """How trained policies act in evaluation (both are reported)."""
     headline_act: str = "stochastic"
@@ -309,6 +334,17 @@ class RunConfig(Settings):
     """What ``pirl reproduce`` trains and evaluates."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
+
+    def with_variant(self, variant: dict[str, Any]) -> RunConfig:
+        """A copy with a PIRL variant applied: each key of ``variant`` goes to the section that
+        has it, ``pare`` first, then ``advisor`` (e.g. ``{advisor: oracle, lam_cam: 4,
+        oracle_accuracy: 0.5}``); a key of neither is refused naming both sections' keys."""
+        pare_keys = {f.name for f in dataclasses.fields(PareSettings)}
+        advisor_keys = {f.name for f in dataclasses.fields(AdvisorSettings)}
+        check_keys(variant, sorted(pare_keys | advisor_keys), "reproduce.pirl_variants")
+        pare = {k: v for k, v in variant.items() if k in pare_keys}
+        advisor = {k: v for k, v in variant.items() if k not in pare_keys}
+        return self.with_overrides(pare=pare, advisor=advisor)
 
     def with_overrides(self, **sections: dict[str, Any]) -> RunConfig:
         """A copy with some values changed, e.g. ``with_overrides(train={"total_steps": 10})``."""

@@ -156,11 +156,17 @@ class _Decoder:
             cls = getattr(cls, part, None)
         if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
             raise UnsafeFile(f"refused {self.path}: {name} is not one of pirl's data classes")
-        known = {f.name for f in dataclasses.fields(cls)}
         obj = object.__new__(cls)
-        for key, value in fields.items():
-            if key in known:
-                object.__setattr__(obj, key, self(value))
+        for f in dataclasses.fields(cls):
+            if f.name in fields:
+                value = self(fields[f.name])
+            elif f.default is not dataclasses.MISSING:
+                value = f.default  # a field added since the file was written
+            elif f.default_factory is not dataclasses.MISSING:
+                value = f.default_factory()
+            else:
+                raise ValueError(f"{self.path} is damaged ({name} lacks {f.name})")
+            object.__setattr__(obj, f.name, value)
         return obj
 
 

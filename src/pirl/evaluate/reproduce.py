@@ -78,7 +78,7 @@ def pirl_variants(cfg: RunConfig, advisor: str) -> list[dict[str, Any]]:
                 raise ConfigError(f"reproduce.pirl_variants[{k}] must be a mapping of pare keys")
             variants.append({"advisor": advisor, **v})
         for v in variants:  # an unknown key or a bad value is refused before any training
-            cfg.with_overrides(pare=v)
+            cfg.with_variant(v)
             advisor_kind(str(v["advisor"]))
         return variants
     advisor_kind(advisor)
@@ -359,7 +359,7 @@ def describe_plan(
         elif not entry.advised:
             ppo_s += method_steps(cfg, j.method) / r["ppo_steps_per_s"]
         else:
-            pare = cfg.with_overrides(pare=dict(j.pare)).pare
+            pare = cfg.with_variant(dict(j.pare)).pare
             kind = advisor_kind(j.advisor)
             steps = method_steps(cfg, j.method)
             ppo_s += steps * kind.train_cost / r["ppo_steps_per_s"]

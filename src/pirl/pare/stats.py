@@ -49,6 +49,10 @@ class PareStats:
     student_majority: float = 0.0
     student_heldout: int = 0
     student_per_field: dict[str, float] = field(default_factory=dict)
+    student_kappa: float = 0.0
+    """Student mode: Cohen's kappa against the teacher over the fields it varies."""
+    student_informative: list[str] = field(default_factory=list)
+    """Student mode: the fields the teacher varies (none: it carries no state information)."""
     student_dataset_size: int = 0
     student_refits: int = 0
     student_refits_deferred: int = 0

@@ -34,7 +34,8 @@ class StudentSource:
         student: the distilled advisor (fitted or not).
         dataset: where teacher answers are stored and read.
         teacher: the queue that asks the teacher about sampled states.
-        gate: held-out agreement the student needs before it shapes.
+        gate: what the student needs before it shapes: ``(threshold, "kappa")`` or
+            ``(threshold, "agreement")`` (a bare number is an agreement threshold).
         refit_every: vector steps between refits (PPO's ``n_steps``).
         fit_steps: Adam steps per refit.
         refit_growth: once the student has passed its gate, refit only when the answers
@@ -54,7 +55,7 @@ class StudentSource:
         student: Student,
         dataset: TeacherDataset,
         teacher: TeacherQueue,
-        gate: float = 0.8,
+        gate: float | tuple[float, str] = 0.8,
         refit_every: int = 256,
         fit_steps: int = 100,
         refit_growth: float = 0.0,
@@ -63,7 +64,9 @@ class StudentSource:
     ) -> None:
         self.board, self.health, self.stats = board, health, health.stats
         self.student, self.dataset, self.teacher = student, dataset, teacher
-        self.gate, self.refit_every = float(gate), int(refit_every)
+        # (threshold, what it applies to): see PareSettings.student_gate_on.
+        self.gate = gate if isinstance(gate, tuple) else (float(gate), "agreement")
+        self.refit_every = int(refit_every)
         self.fit_steps, self.refit_growth = int(fit_steps), float(refit_growth)
         self.wait_teacher, self.timeout_s = bool(wait_teacher), float(timeout_s)
         self._update_student_stats()
@@ -81,7 +84,7 @@ class StudentSource:
             seed=setup.seed, source=setup.source,
         )  # fmt: skip
         return cls(
-            setup.board, setup.health, advice.student, advice.dataset, teacher, p.student_gate,
+            setup.board, setup.health, advice.student, advice.dataset, teacher, p.gate(),
             setup.refit_every, p.student_fit_steps, p.student_refit_growth,
             p.student_wait_teacher, p.timeout_s,
         )  # fmt: skip
@@ -116,7 +119,7 @@ class StudentSource:
         sampled = time.perf_counter()
         self.teacher.sample(env, features, worlds)
         asked = time.perf_counter()
-        if self.student.passes(self.gate):
+        if self.student.passes(*self.gate):
             board.rec[rows] = self.student.predict(features)
             board.meta[rows, HAS] = 1
             board.meta[rows, STEP] = board.t
@@ -165,7 +168,7 @@ class StudentSource:
         # once the data has grown by refit_growth since the last fit: as the student
         # converges, refits (the largest cost PIRL adds to PPO) become rarer.
         if new > 0 and (
-            not student.passes(self.gate) or new >= self.refit_growth * student.fitted_rows
+            not student.passes(*self.gate) or new >= self.refit_growth * student.fitted_rows
         ):
             student.fit(self.fit_steps)
             st.student_refits += 1
@@ -180,7 +183,8 @@ class StudentSource:
         st.student_agreement, st.student_majority = score.agreement, score.majority
         st.student_heldout, st.student_dataset_size = score.heldout, self.student.dataset_size
         st.student_per_field = dict(score.per_field)
-        if st.gate_passed_at_step < 0 and self.student.passes(self.gate):
+        st.student_kappa, st.student_informative = score.kappa, list(score.informative)
+        if st.gate_passed_at_step < 0 and self.student.passes(*self.gate):
             st.gate_passed_at_step = st.steps
 
 
