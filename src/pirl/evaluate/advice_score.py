@@ -261,8 +261,8 @@ def score_advisor(
 
 def run_calls(cfg: RunConfig, advisor: str) -> int:
     """LLM calls one PIRL run of ``cfg`` makes with ``advisor``: in student mode its teacher
-    rate times the run's steps plus the profile's head start (LLM teachers only); otherwise one answer per world
-    every ``pare.query_every`` steps."""
+    rate times the run's steps plus the profile's head start (LLM teachers only); otherwise
+    one answer per world every ``pare.query_every`` steps."""
     from pirl.advice.registry import advisor_kind
     from pirl.agents.runs import method_steps
 
