@@ -143,7 +143,7 @@ class PareSettings(Settings, section="pare"):
     learned of the teacher's signal, so an imperfect teacher passes and a near-constant one
     does not); 'agreement': raw held-out agreement reaches student_gate (a noisy teacher can
     never pass it). Chosen on distillation states: docs/advice.md."""
-    student_kappa_gate: float = 0.2
+    student_kappa_gate: float = 0.1
     """Student mode, ``student_gate_on: kappa``: the kappa that opens the gate."""
     student_fit_steps: int = 100
     """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
