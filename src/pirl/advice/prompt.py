@@ -18,11 +18,17 @@ the text, and keys of stored answers (:func:`prompt_id`) carry it.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 from pirl.advice.recommendation import FORMAT_EXAMPLE
+from pirl.config.errors import ConfigError
 from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE
+from pirl.config.run import TEMPLATE_VARIANT
 
 __all__ = [
     "FOOTPRINTS",
@@ -30,9 +36,13 @@ __all__ = [
     "PromptState",
     "STATE_MARKER",
     "VARIANTS",
+    "TEMPLATE_PREFIX",
     "build_prompt",
+    "load_template",
     "paper_half_width",
+    "prompt_context",
     "prompt_id",
+    "template_hash",
 ]
 
 VARIANTS: tuple[str, ...] = ("paper", "compact")
@@ -47,10 +57,47 @@ PROMPT_VERSION = 2
 answers to older prompts are never served as answers to these (:func:`prompt_id`)."""
 
 
+TEMPLATE_PREFIX = TEMPLATE_VARIANT
+"""A prompt variant ``file:<path>`` is a Jinja2 template of the user's (``advisor.prompt_file``)."""
+
+
 def prompt_id(variant: str) -> str:
     """The variant and text version, e.g. ``"compact-v2"``: what a key of stored answers
-    (the teacher dataset) records about the prompt."""
+    (the teacher dataset) records about the prompt. A template is named by the hash of its
+    text (``template-<sha>-v2``), so answers to one template are never reused for another."""
+    if variant.startswith(TEMPLATE_PREFIX):
+        return f"template-{template_hash(variant[len(TEMPLATE_PREFIX) :])}-v{PROMPT_VERSION}"
     return f"{variant}-v{PROMPT_VERSION}"
+
+
+@functools.lru_cache(maxsize=16)
+def _read_template(path: str, mtime_ns: int) -> tuple[Any, str]:
+    import jinja2
+
+    text = Path(path).read_text(encoding="utf-8")
+    env = jinja2.Environment(undefined=jinja2.StrictUndefined, autoescape=False)
+    return env.from_string(text), hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def load_template(path: str | Path) -> tuple[Any, str]:
+    """The compiled Jinja2 template at ``path`` and its text's hash; one line (ConfigError)
+    for a missing file or a template that does not compile."""
+    import jinja2
+
+    path = Path(path)
+    try:
+        return _read_template(str(path.resolve()), path.stat().st_mtime_ns)
+    except OSError as exc:
+        raise ConfigError(f"advisor.prompt_file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"advisor.prompt_file {path}: not UTF-8 text") from None
+    except jinja2.TemplateSyntaxError as exc:
+        raise ConfigError(f"advisor.prompt_file {path}, line {exc.lineno}: {exc.message}") from None
+
+
+def template_hash(path: str | Path) -> str:
+    """The hash of a template's text (12 hex digits)."""
+    return load_template(path)[1]
 
 
 COMPACT_TEMPLATE = (
@@ -76,6 +123,11 @@ class PromptState:
         resolution: image resolution, as text (the paper lists it among the camera parameters).
         obstacles: spheres ``(cx, cy, cz, r)`` in cell units.
         max_range: frustum model only: farthest ground distance seen, in cells.
+        local_map: the ground around the UAV, rows of y (top = highest) with one character
+            per x: ``U`` the UAV, ``#`` blocked at its altitude, ``o`` seen, ``.`` not yet,
+            blank off the grid (templates only; the built-in prompts do not show it).
+        coarse_map: the grid in blocks, one digit per block: the tenths seen (9 = 90% or
+            more), rows of y, top = highest (templates only).
     """
 
     position: tuple[int, int, int]
@@ -90,6 +142,8 @@ class PromptState:
     resolution: str = "640x480"
     obstacles: tuple[tuple[float, float, float, float], ...] = ()
     max_range: float = 8.0
+    local_map: str = ""
+    coarse_map: str = ""
 
     def __post_init__(self) -> None:
         if self.footprint not in FOOTPRINTS:
@@ -189,17 +243,62 @@ def _ranges() -> str:
     )
 
 
+def _camera(state: PromptState, compact: bool) -> str:
+    items = (_num(state.fov_deg, 0), state.resolution, int(state.tilt), int(state.pan))
+    return ("[{},{},{},{},{}]" if compact else "[{}, {}, {}, {}, {}]").format(
+        *items, _zoom(state.zoom)
+    )
+
+
+def prompt_context(state: PromptState, decimals: int = 2) -> dict[str, Any]:
+    """The variables a prompt template sees (docs/advice.md lists them), each already
+    formatted as the built-in prompts format it."""
+    if decimals < 0:
+        raise ValueError(f"decimals must be >= 0, got {decimals}")
+    x, y, z = (int(v) for v in state.position)
+    sx, sy, sz = (int(v) for v in state.size)
+    return {
+        "x": x, "y": y, "z": z, "sx": sx, "sy": sy, "sz": sz,
+        "tilt": int(state.tilt), "pan": int(state.pan), "zoom": _zoom(state.zoom),
+        "fov": _num(state.fov_deg, 0), "resolution": state.resolution,
+        "camera": _camera(state, False), "camera_compact": _camera(state, True),
+        "battery": _num(min(max(state.battery, 0.0), 1.0), decimals),
+        "coverage": _num(min(max(state.coverage, 0.0), 1.0), decimals),
+        "footprint": state.footprint, "max_range": _num(state.max_range, 1),
+        "view_rule": _view_rule(state, compact=False),
+        "view_rule_compact": _view_rule(state, compact=True),
+        "view_now": _view_now(state, compact=False),
+        "view_now_compact": _view_now(state, compact=True),
+        "obstacles": _obstacles(state, compact=False),
+        "obstacles_compact": _obstacles(state, compact=True),
+        "obstacle_list": [tuple(float(v) for v in o) for o in state.obstacles],
+        "ranges": _ranges(), "format_example": FORMAT_EXAMPLE,
+        "format_ranges": COMPACT_TEMPLATE, "state_marker": STATE_MARKER,
+        "local_map": state.local_map, "coarse_map": state.coarse_map,
+    }  # fmt: skip
+
+
 def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) -> str:
     """The prompt for ``state``: task, environment summary and request template.
 
     Args:
         state: the situation to describe.
-        variant: one of :data:`VARIANTS`.
+        variant: one of :data:`VARIANTS`, or ``file:<path>`` for a Jinja2 template rendered
+            with :func:`prompt_context`.
         decimals: decimals of battery and coverage (obstacles always use 1).
 
     Raises:
         ValueError: unknown variant, or negative ``decimals``.
     """
+    if variant.startswith(TEMPLATE_PREFIX):
+        import jinja2
+
+        path = variant[len(TEMPLATE_PREFIX) :]
+        template, _ = load_template(path)
+        try:
+            return template.render(**prompt_context(state, decimals))
+        except jinja2.TemplateError as exc:  # an unknown variable, a bad filter
+            raise ConfigError(f"advisor.prompt_file {path}: {exc}") from None
     if variant not in VARIANTS:
         raise ValueError(f"unknown prompt variant {variant!r}; allowed: {', '.join(VARIANTS)}")
     if decimals < 0:
@@ -207,10 +306,7 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
     compact = variant == "compact"
     x, y, z = (int(v) for v in state.position)
     sx, sy, sz = (int(v) for v in state.size)
-    items = (_num(state.fov_deg, 0), state.resolution, int(state.tilt), int(state.pan))
-    camera = ("[{},{},{},{},{}]" if compact else "[{}, {}, {}, {}, {}]").format(
-        *items, _zoom(state.zoom)
-    )
+    camera = _camera(state, compact)
     battery = _num(min(max(state.battery, 0.0), 1.0), decimals)
     coverage = _num(min(max(state.coverage, 0.0), 1.0), decimals)
     # Everything before the state is the same for every state of a world configuration: an

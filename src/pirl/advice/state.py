@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from pirl.advice.prompt import PromptState, build_prompt
+from pirl.advice.prompt import TEMPLATE_PREFIX, PromptState, build_prompt
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
@@ -22,8 +22,9 @@ def prompt_state(world: WorldBatch, e: int) -> PromptState:
     return view_prompt_state(WorldView.of(world, e))
 
 
-def view_prompt_state(view: WorldView) -> PromptState:
-    """The :class:`~pirl.advice.prompt.PromptState` of a world's :class:`WorldView`."""
+def view_prompt_state(view: WorldView, maps: bool = False) -> PromptState:
+    """The :class:`~pirl.advice.prompt.PromptState` of a world's :class:`WorldView`; with
+    ``maps``, its text maps too (:func:`text_maps`: only templates show them)."""
     cfg = view.cfg
     # Views are booked on coverable cells only, so the seen cells are the covered ones.
     coverable = int(np.count_nonzero(view.coverable))
@@ -32,6 +33,7 @@ def view_prompt_state(view: WorldView) -> PromptState:
         (float(cx), float(cy), float(cz), float(r)) for cx, cy, cz, r in view.obstacles
     )
     tilt, pan, zoom10 = view.camera
+    local, coarse = text_maps(view) if maps else ("", "")
     return PromptState(
         position=tuple(int(v) for v in view.position),
         tilt=int(tilt),
@@ -44,7 +46,46 @@ def view_prompt_state(view: WorldView) -> PromptState:
         fov_deg=cfg.fov_deg,
         obstacles=obstacles,
         max_range=cfg.max_range,
+        local_map=local,
+        coarse_map=coarse,
     )
+
+
+def text_maps(view: WorldView) -> tuple[str, str]:
+    """The two maps a prompt template may show (``local_map``, ``coarse_map`` of
+    :class:`~pirl.advice.prompt.PromptState`): the window of ``env.obs_window`` cells round the
+    UAV at its altitude (``U`` it, ``#`` blocked, ``o`` seen, ``.`` not yet, blank off the
+    grid) and the grid in ``env.obs_global`` blocks a side, one digit per block for the tenths
+    of its coverable cells seen (``#``: a block with none); both with the highest y on top."""
+    cfg = view.cfg
+    sx, sy, _ = cfg.size
+    x0, y0, z0 = (int(v) for v in view.position)
+    half = cfg.obs_window // 2
+    seen = view.views > 0
+    rows = []
+    for y in range(y0 + half, y0 - half - 1, -1):
+        row = []
+        for x in range(x0 - half, x0 + half + 1):
+            if not (0 <= x < sx and 0 <= y < sy):
+                row.append(" ")
+            elif (x, y) == (x0, y0):
+                row.append("U")
+            elif view.blocked[x, y, z0]:
+                row.append("#")
+            else:
+                row.append("o" if seen[x, y] else ".")
+        rows.append("".join(row).rstrip())
+    g = cfg.obs_global
+    bx, by = np.arange(sx) * g // sx, np.arange(sy) * g // sy
+    total = np.zeros((g, g))
+    done = np.zeros((g, g))
+    np.add.at(total, (bx[:, None], by[None, :]), view.coverable)
+    np.add.at(done, (bx[:, None], by[None, :]), seen & view.coverable)
+    share = np.divide(done, total, out=np.zeros_like(done), where=total > 0)
+    digits = np.minimum(9, (share * 10).astype(int))
+    cell = [[str(digits[i, j]) if total[i, j] else "#" for j in range(g)] for i in range(g)]
+    coarse = ["".join(cell[i][j] for i in range(g)) for j in range(g - 1, -1, -1)]
+    return "\n".join(rows), "\n".join(coarse)
 
 
 def advice_requests(
@@ -69,8 +110,15 @@ def view_requests(
     """Prompts for worlds seen through their views, plus the views themselves when
     ``advisor.wants_view`` (then they must be frozen copies: the advisor reads them later,
     in another thread)."""
-    prompts = [build_prompt(view_prompt_state(v), prompt_variant, decimals) for v in views]
+    maps = prompt_variant.startswith(TEMPLATE_PREFIX)
+    prompts = [build_prompt(view_prompt_state(v, maps), prompt_variant, decimals) for v in views]
     return prompts, (list(views) if getattr(advisor, "wants_view", False) else None)
 
 
-__all__ = ["advice_requests", "prompt_state", "view_prompt_state", "view_requests"]
+__all__ = [
+    "advice_requests",
+    "prompt_state",
+    "text_maps",
+    "view_prompt_state",
+    "view_requests",
+]

@@ -179,7 +179,8 @@ class PareSettings(Settings, section="pare"):
             "query_every", "timeout_s", "student_fit_steps", "student_hidden", "failure_window"
         )
         self.require_choice("mode", ("student", "sync", "async"))
-        self.require_choice("prompt_variant", ("paper", "compact"))
+        if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
+            self.require_choice("prompt_variant", ("paper", "compact"))
         self.require_choice("student_gate_on", ("kappa", "agreement"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
@@ -223,6 +224,11 @@ class AdvisorSettings(Settings, section="advisor"):
     """Retries with backoff on rate limits and dropped connections."""
     openai_concurrency: int = 8
     """Requests in flight at once."""
+    prompt_file: str = ""
+    """A Jinja2 template of your own prompt (its variables: docs/advice.md); empty = the
+    built-in prompt pare.prompt_variant names. The reply format, the parser and the grammar
+    stay PIRL's, so the template must ask for that format (examples/prompts/ holds the
+    built-in prompts as templates). Its text's hash joins the keys of stored answers."""
     oracle_accuracy: float = 1.0
     """'oracle' only: the share of states whose answer is the oracle's own; the others get a
     valid answer drawn uniformly, seeded by the prompt (a stand-in for an imperfect LLM:
@@ -314,6 +320,10 @@ class ReproduceSettings(Settings, section="reproduce"):
             check_seed(seed, "reproduce.seeds:")
 
 
+TEMPLATE_VARIANT = "file:"
+"""``pare.prompt_variant`` of a run whose prompt is ``advisor.prompt_file``'s template."""
+
+
 @dataclass(frozen=True)
 class RunConfig(Settings):
     """A whole preset: the environment plus every training section."""
@@ -334,6 +344,20 @@ class RunConfig(Settings):
     """What ``pirl reproduce`` trains and evaluates."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
+
+    def validate(self) -> None:
+        """``advisor.prompt_file`` becomes the prompt (``pare.prompt_variant: file:<path>``,
+        the path made absolute, so workers in other folders read the same file)."""
+        path = self.advisor.prompt_file
+        if path:
+            from pathlib import Path
+
+            file = Path(path).expanduser()
+            if not file.is_file():
+                raise self.advisor.refuse("prompt_file", "no such file")
+            variant = TEMPLATE_VARIANT + str(file.resolve())
+            if self.pare.prompt_variant != variant:
+                object.__setattr__(self, "pare", self.pare.replace(prompt_variant=variant))
 
     def with_variant(self, variant: dict[str, Any]) -> RunConfig:
         """A copy with a PIRL variant applied: each key of ``variant`` goes to the section that
