@@ -152,6 +152,15 @@ def test_an_installed_plugin_answers_pirl_advise_and_trains_pirl(tmp_path):
     assert advised.returncode == 0, advised.stderr
     assert "answer from example:steady" in advised.stdout
     assert "parsed:      Recommendation(" in advised.stdout
+    # Scored against the oracle like any advisor: a steady answer carries no state information.
+    scored = pirl(
+        "advise", "--advisor", "example", "--config", str(TEST_CFG), "--no-cache",
+        "--score", "40", "--out", str(tmp_path / "score.json"), "--price-in", "1",
+    )  # fmt: skip
+    assert scored.returncode == 0, scored.stderr
+    score = json.loads((tmp_path / "score.json").read_text())
+    assert score["parse_rate"] == 1.0 and score["states"] == 40
+    assert abs(score["kappa_move"]) < 0.2 and "price of one PIRL run" in scored.stdout
     run = tmp_path / "run"
     trained = pirl(
         "train", "--method", "pirl", "--advisor", "example", "--config", str(TEST_CFG),
