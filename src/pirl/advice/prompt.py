@@ -4,7 +4,7 @@ The builder is deterministic and rounds every number (battery and coverage to ``
 obstacle coordinates and radii to 1 decimal), so equal situations give byte-equal prompts and the
 advice cache can work. Two variants exist:
 
-- ``paper``: the paper's three parts in full sentences (DESIGN.md section 6), the request
+- ``paper``: the paper's three parts in full sentences, the request
   before the environment summary so that the state comes last.
 - ``compact``: the same items in terse form, for small local models: about 40% fewer tokens,
   and the format line shows each value's range instead of sample values (a 135M model copies

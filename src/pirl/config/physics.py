@@ -14,7 +14,7 @@ from pirl.config.load import Settings
 
 @dataclass(frozen=True)
 class PhysicsConfig(Settings, section="physics"):
-    """How the grid world maps onto a flying quadrotor (DESIGN.md section 10)."""
+    """How the grid world maps onto a flying quadrotor (docs/physics.md)."""
 
     cell_size_m: float = 1.0
     """Horizontal side of a grid cell, metres. Cell (i, j) is centred at (i, j) * cell_size_m."""

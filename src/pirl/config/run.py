@@ -101,7 +101,7 @@ class TrainSettings(Settings, section="train"):
 
 @dataclass(frozen=True)
 class PareSettings(Settings, section="pare"):
-    """PIRL's reward shaping (DESIGN.md section 5)."""
+    """PIRL's reward shaping (docs/advice.md)."""
 
     advisor: str = "local"
     """'local' (embedded model), 'openai' (any OpenAI-compatible server), 'oracle' or an

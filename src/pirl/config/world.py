@@ -64,7 +64,7 @@ def zoom_to_tenths(zoom: float, key: str = "zoom") -> int:
 
 @dataclass(frozen=True)
 class VCPPConfig(Settings, section="env"):
-    """Every setting of the VCPP world and environment (DESIGN.md sections 3, 4 and 8)."""
+    """Every setting of the VCPP world and environment (docs/design.md)."""
 
     size: tuple[int, int, int] = BASE_SIZE
     """Grid size (X, Y, Z) in cells; each at least 3."""

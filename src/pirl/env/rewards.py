@@ -1,7 +1,7 @@
 """Reward weights (static for PPO-SR, EWRI re-drawn at every reset) and the weighted sum.
 
 The raw terms come from the world's rules (:mod:`pirl.world.dynamics`); this module only
-decides how much each one counts (DESIGN.md section 4).
+decides how much each one counts (docs/design.md).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary
 
-# The paper's results (DESIGN.md section 1): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
+# The paper's results (its tables): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
 grid     ppo-sr   0.64 0.55 0.22  0.61 0.56 0.24  0.63 0.48 0.26
 grid     ppo-ewri 0.61 0.59 0.24  0.59 0.62 0.25  0.62 0.36 0.27

@@ -1,4 +1,4 @@
-"""PARE's alignment terms (DESIGN.md section 5), for one world or a batch of worlds.
+"""PARE's alignment terms, for one world or a batch of worlds.
 
 With ``dp = p_{t+1} - p_t`` and ``dq = (dx, dy, dz)`` of the advice:
 

@@ -1,5 +1,5 @@
 """PARE's pure core: one step's shaped rewards from the poses before and after it, the advice
-each world holds and the weights (DESIGN.md section 5). No environment, no advisor.
+each world holds and the weights (:mod:`pirl.pare.alignment`). No environment, no advisor.
 
 Advice rows are ``(pan, tilt, zoom, dx, dy, dz)``; each world's advice metadata is
 ``(has advice, step it was asked at, kind)``. A world without advice gets ``f_llm = 0`` and
@@ -25,7 +25,7 @@ HAS, STEP, KIND = 0, 1, 2
 
 @dataclass(frozen=True)
 class Weights:
-    """The weights of the LLM term (DESIGN.md section 5)."""
+    """The weights of the LLM term (:mod:`pirl.pare.alignment`)."""
 
     lam_cam: float = 1.0
     """Weight of the camera alignment."""

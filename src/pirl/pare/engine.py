@@ -3,7 +3,7 @@ environment adapter (:mod:`pirl.pare.vec_env` for Stable-Baselines3, :mod:`pirl.
 for Gymnasium) through the environment's public shaping hooks.
 
 The advice about state ``s_t`` shapes the reward ``r_{t+1}``: after the action, the move
-``p_t -> p_{t+1}`` and the new camera are compared with the advice (DESIGN.md section 5) and
+``p_t -> p_{t+1}`` and the new camera are compared with the advice (:mod:`pirl.pare.alignment`) and
 ``w_llm * f_llm`` is added to the reward, ``w_llm`` being the episode's weight of the LLM term.
 None of the sources ever passes one state's advice off as another's. When more than
 ``max_failure_rate`` of the last ``failure_window`` teacher answers failed,

@@ -1,4 +1,4 @@
-"""Physics-based evaluation: the grid policy flown by a simulated quadrotor (DESIGN.md §10).
+"""Physics-based evaluation: the grid policy flown by a simulated quadrotor (docs/physics.md).
 
 - :mod:`.mission`: the logic every backend shares (waypoints from actions, coverage from the
   pose, battery, metrics), built on the grid's own world, observation and metrics code.

@@ -18,7 +18,7 @@ One step, as a backend drives it::
         fly towards mission.target_position()   # the backend's physics, dt at a time
     obs, terminated, truncated, info = mission.end_step(pose)
 
-Rules (DESIGN.md sections 3 and 10; docs/physics.md):
+Rules (docs/physics.md):
 
 - **Waypoints.** A move targets the centre of the neighbouring cell of the cell the drone is
   in now (its position rounded to the grid), so wind drift is part of what the policy sees. A

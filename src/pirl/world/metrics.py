@@ -1,4 +1,4 @@
-"""Episode metrics (DESIGN.md section 9) read off a world's bookkeeping.
+"""Episode metrics (docs/design.md: metrics) read off a world's bookkeeping.
 
 - VCR = covered / coverable.
 - BE = VCR / (2 - b_end / b_start), battery normalized so b_start = 1.
@@ -14,7 +14,7 @@ from pirl.world.state import WorldBatch
 
 
 def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
-    """Metrics of world ``e``'s episode so far (DESIGN.md section 9)."""
+    """Metrics of world ``e``'s episode so far (docs/design.md: metrics)."""
     r = dict(zip(batch.status.dtype.names, batch.status[e].tolist(), strict=True))
     covered = r["covered"]
     coverable = r["coverable"]

@@ -191,7 +191,7 @@ def blocked_grid(size: tuple[int, int, int], obstacles: np.ndarray) -> np.ndarra
 
 
 def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
-    """Draw obstacles, a free start cell and the wind seed from ``rng`` (DESIGN.md section 3).
+    """Draw obstacles, a free start cell and the wind seed from ``rng``.
 
     Obstacle layouts that leave no free cell or no coverable ground are drawn again.
     """
