@@ -84,12 +84,13 @@ def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 12) -> Path:
     read-only disk) leaves neither a partial GIF nor a stray temporary file."""
     path = Path(path)
     check_gif_target(path, fps)
+    # Encoded in memory, then written by plain file IO: a failed write raises once, here,
+    # instead of again from the GIF writer's finaliser.
+    data = imageio.mimwrite("<bytes>", frames, format="GIF", duration=1000 / fps, loop=0)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.gif")
     try:
-        with imageio.get_writer(tmp, mode="I", duration=1000 / fps, loop=0) as writer:
-            for frame in frames:
-                writer.append_data(frame)
+        tmp.write_bytes(data)
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
