@@ -276,3 +276,33 @@ def test_the_unshaped_warning_says_when_a_teacher_carries_no_information():
              "student_informative": [], "student_heldout": 50}  # fmt: skip
     line = unshaped_warning(stats, 0.5, 0.1)
     assert line is not None and "carry no state information" in line
+
+
+# -- 5. the curve ------------------------------------------------------------------------------
+def test_the_curve_has_measured_points_a_band_and_a_break_even(tmp_path):
+    from pirl.evaluate.advice_curve import CurveAdvisor, break_even, curve_points, plot, section
+
+    rng = np.random.default_rng(0)
+    records = []
+
+    def runs(name: str, vcr: float) -> frozenset[str]:
+        sources = []
+        for seed in range(3):
+            source = f"{name}-s{seed}"
+            sources.append(source)
+            for _ in range(4):
+                records.append({"source": source, "train_seed": seed, "size": "30x30x3",
+                                "act": "stochastic", "sim": "grid",
+                                "vcr": vcr + 0.01 * rng.standard_normal()})  # fmt: skip
+        return frozenset(sources)
+
+    base = runs("ppo-ewri", 0.85)
+    good = CurveAdvisor("oracle (not an LLM)", 1.0, 1.0, runs("good", 0.99), 0.98)
+    weak = CurveAdvisor("oracle, accuracy 0.25 (not an LLM)", 0.36, 0.2, runs("weak", 0.85), 0.0)
+    points, band = curve_points(records, [good, weak], base, "stochastic")
+    assert {p.advisor.label for p in points} == {good.label, weak.label}
+    found = break_even(points, "30x30x3")
+    assert found is not None and found.advisor is good and found.p_lo > 0.5
+    text = section(points, band, "stochastic")
+    assert "break-even at agreement 1.00" in text and "| PPO-EWRI |" in text and "0%" in text
+    assert plot(points, band, tmp_path / "a.png", "stochastic").stat().st_size > 1000

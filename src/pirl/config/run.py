@@ -301,6 +301,9 @@ class ReproduceSettings(Settings, section="reproduce"):
     """The mode of the report's first table and figure, the same for every learned method."""
     train_workers: int = 0
     """Training runs at once, each a process with one torch and one numba thread (0 = cores)."""
+    score_states: int = 0
+    """Score each PIRL variant's advisor against the oracle on this many validation states
+    (``pirl advise --score``) and draw the advice-quality curve in the report (0 = no)."""
     teacher_phase_answers: int = 0
     """A head start for slow teachers: before the PIRL runs of an LLM teacher in student mode,
     it answers this many planner states into the shared teacher dataset (in a worker of its
@@ -314,6 +317,8 @@ class ReproduceSettings(Settings, section="reproduce"):
         )
         if self.teacher_phase_answers < 0:
             raise self.refuse("teacher_phase_answers", "must be >= 0")
+        if self.score_states < 0:
+            raise self.refuse("score_states", "must be >= 0")
         if not self.seeds:
             raise self.refuse("seeds", "must be a non-empty list of integers")
         for seed in self.seeds:

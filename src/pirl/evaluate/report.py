@@ -573,8 +573,12 @@ def write_report(
     code_version: str = "unknown",
     notes: Sequence[str] = (),
     headline_act: str = "stochastic",
+    extra: tuple[str, Path] | None = None,
 ) -> Path:
     """Write table.md, figure.png, intervals.png, learning_curves.png and report.html.
+
+    ``extra``: a further (markdown section, figure) to show after the advice table (the
+    advice-quality curve of ``pirl reproduce --profile study-advice``).
 
     table.md and report.html open with a summary generated from the numbers
     (:func:`summary_lines`); report.html shows the interval figures next. table.md then holds,
@@ -600,6 +604,7 @@ def write_report(
             "",
             *blocks,
             advice_table(advisor_stats),
+            extra[0] if extra else "",
             improvement,
             camera,
             physics_gap_table(records),
@@ -631,6 +636,10 @@ def write_report(
         sections.append(
             f"<h2>Aggregate intervals over seeds (grid, act {act})</h2>"
             f"<img alt='intervals {act}' src='{_data_uri(path)}'>"
+        )
+    if extra:
+        sections.append(
+            f"<h2>PIRL by advice quality</h2><img alt='advice quality' src='{_data_uri(extra[1])}'>"
         )
     sections += [
         f"<p>Code version: <code>{html.escape(code_version)}</code></p>",

@@ -540,6 +540,7 @@ def reproduce(
         "Advisors other than an LLM (the oracle) and planners are labelled as such.",
         settings_line(cfg),
     ]
+    curve = advice_quality(cfg, out, advisor, runs, stats, log) if rp.score_states else None
     return write_report(
         out / "report",
         summary,
@@ -549,7 +550,64 @@ def reproduce(
         code_version=git_commit(),
         notes=notes,
         headline_act=rp.headline_act,
+        extra=curve,
     )
+
+
+def advice_quality(
+    cfg: RunConfig,
+    out: Path,
+    advisor: str,
+    runs: list[Path],
+    stats: dict[str, Any],
+    log: Log = print,
+) -> tuple[str, Path]:
+    """The advice-quality curve of a reproduction (``reproduce.score_states`` > 0): each PIRL
+    variant's advisor scored against the oracle (``pirl advise --score``, kept in
+    ``report/scores/``: a rerun reuses them), its runs' VCR by that measured agreement, and
+    the markdown section with the break-even. Returns (section, figure)."""
+    from pirl.advice.factory import make_advisor
+    from pirl.agents.pirl_advice import shaped_share
+    from pirl.evaluate.advice_curve import CurveAdvisor, curve_points, plot, section
+    from pirl.evaluate.advice_score import score_advisor
+
+    rp = cfg.reproduce
+    folder = out / "report" / "scores"
+    folder.mkdir(parents=True, exist_ok=True)
+    records = [json.loads(line) for line in (out / "eval" / "episodes.jsonl").open()]
+    by_name = {r.name: r for r in runs}
+    advisors = []
+    for variant in pirl_variants(cfg, advisor):
+        name = _variant_name("pirl", variant)
+        path = folder / f"{name}.json"
+        vcfg = cfg.with_variant(variant)
+        score = json.loads(path.read_text()) if path.is_file() else {}
+        if score.get("states") != rp.score_states:
+            log(f"scoring {name}'s advisor on {rp.score_states} validation states")
+            adv = make_advisor(str(variant["advisor"]), vcfg, cache=True)
+            try:
+                score = score_advisor(adv, vcfg, rp.score_states).to_dict()
+            finally:
+                adv.close()
+            path.write_text(json.dumps(score, indent=2))
+        own = [by_name[f"{name}-s{seed}"] for seed in rp.seeds if f"{name}-s{seed}" in by_name]
+        shares = [shaped_share(stats[r.name]) for r in own if "steps" in stats.get(r.name, {})]
+        label = score["advisor"]
+        advisors.append(
+            CurveAdvisor(
+                label,
+                float(score["agreement_move"]),
+                float(score["kappa_move"]),
+                frozenset(str(r) for r in own),
+                sum(shares) / len(shares) if shares else None,
+            )  # fmt: skip
+        )
+    baseline = frozenset(str(r) for r in runs if r.name.startswith("ppo-ewri-"))
+    act = rp.headline_act
+    points, band = curve_points(records, advisors, baseline, act)
+    figure = plot(points, band, out / "report" / "advice_quality.png", act,
+                  f"PIRL by advice quality ({len(rp.seeds)} seeds; student mode)")  # fmt: skip
+    return section(points, band, act), figure
 
 
 def settings_line(cfg: RunConfig) -> str:
