@@ -9,13 +9,12 @@ import json
 import os
 import subprocess
 import sys
-import threading
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from chat_server import ChatServer
 from pirl.advice.oracle import MOVES, OracleAdvisor, degraded, oracle_label
 from pirl.advice.prompt import PromptState, build_prompt, prompt_id
 from pirl.advice.recommendation import Recommendation
@@ -105,40 +104,15 @@ def test_the_embedded_llm_is_scored_and_priced(tmp_path):
     assert score["tokens_in"] > 0 and score["price"]["calls"] > 0
 
 
-class _Steady(BaseHTTPRequestHandler):
-    def do_POST(self) -> None:  # noqa: N802 - http.server's name
-        self.rfile.read(int(self.headers.get("content-length") or 0))
-        body = json.dumps({
-            "id": "x", "object": "chat.completion", "created": 0, "model": "m",
-            "choices": [{"index": 0, "finish_reason": "stop",
-                         "message": {"role": "assistant", "content": GOOD}}],
-            "usage": {"prompt_tokens": 120, "completion_tokens": 14, "total_tokens": 134},
-        }).encode()  # fmt: skip
-        self.send_response(200)
-        self.send_header("content-type", "application/json")
-        self.send_header("content-length", str(len(body)))
-        self.end_headers()
-        self.wfile.write(body)
-
-    def log_message(self, *args: object) -> None:
-        pass
-
-
 def test_an_openai_compatible_server_is_scored_with_its_own_token_counts(tmp_path):
-    server = ThreadingHTTPServer(("127.0.0.1", 0), _Steady)
-    server.daemon_threads = True
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
-        url = f"http://127.0.0.1:{server.server_address[1]}/v1"
+    usage = {"prompt_tokens": 120, "completion_tokens": 14, "total_tokens": 134}
+    with ChatServer(GOOD, usage) as server:
         proc = _pirl(
-            "advise", "--advisor", "openai", "--base-url", url, "--model", "m",
+            "advise", "--advisor", "openai", "--base-url", server.url, "--model", "m",
             "--config", str(TEST_CFG), "--score", "30", "--no-cache",
             "--out", str(tmp_path / "s.json"), cwd=tmp_path,
             env={"PIRL_CACHE_DIR": str(tmp_path / "cache")},
         )  # fmt: skip
-    finally:
-        server.shutdown()
-        server.server_close()
     assert proc.returncode == 0, proc.stderr
     score = json.loads((tmp_path / "s.json").read_text())
     assert score["parse_rate"] == 1.0 and score["tokens_counted_by"] == "server"

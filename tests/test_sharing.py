@@ -12,10 +12,8 @@ import pickle
 import shutil
 import subprocess
 import sys
-import threading
 import time
 import zipfile
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import cloudpickle
@@ -24,6 +22,7 @@ import pytest
 import torch
 import yaml
 
+from chat_server import ChatServer
 from pirl.agents import checkpoint
 from pirl.agents.train import train
 from pirl.config import safe_state
@@ -290,47 +289,11 @@ def test_pickle_globals_reads_without_loading(tmp_path):
 
 
 # -- 2. bounded answers ------------------------------------------------------------------------
-class BigReplyServer:
-    """An OpenAI-compatible server whose answer is a valid line plus ``extra`` bytes of text."""
-
-    def __init__(self, extra: int) -> None:
-        self.requests = 0
-        outer = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802 - http.server's name
-                self.rfile.read(int(self.headers.get("content-length") or 0))
-                outer.requests += 1
-                content = GOOD + "\n" + "x" * extra
-                body = json.dumps({
-                    "id": "x", "object": "chat.completion", "created": 0, "model": "m",
-                    "choices": [{"index": 0, "finish_reason": "stop",
-                                 "message": {"role": "assistant", "content": content}}],
-                }).encode()  # fmt: skip
-                self.send_response(200)
-                self.send_header("content-type", "application/json")
-                self.send_header("content-length", str(len(body)))
-                self.end_headers()
-                self.wfile.write(body)
-
-            def log_message(self, *args: object) -> None:
-                pass
-
-        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.server.daemon_threads = True
-        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/v1"
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
-
-
 def test_a_6_mb_answer_is_cut_counted_unparseable_and_never_stored_whole(tmp_path):
     from pirl.advice.cache import CachedAdvisor
     from pirl.advice.openai_advisor import MAX_REPLY_BYTES, OpenAIAdvisor
 
-    server = BigReplyServer(6_000_000)
+    server = ChatServer(GOOD + "\n" + "x" * 6_000_000)
     try:
         env = {"PIRL_CACHE_DIR": str(tmp_path / "cache")}
         proc = _pirl(
