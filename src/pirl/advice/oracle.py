@@ -85,6 +85,9 @@ class OracleAdvisor(Advisor):
     model = "geometric"
     label = ORACLE_LABEL
     wants_view = True
+    accuracy = 1.0
+    """Share of states answered with the oracle's own advice (a class default, so a subclass
+    with an ``__init__`` of its own is the oracle itself)."""
 
     def __init__(self, accuracy: float = 1.0) -> None:
         if not 0.0 <= accuracy <= 1.0:
