@@ -71,9 +71,10 @@ def training_env_config(name: str, cfg: RunConfig) -> VCPPConfig:
 
 # -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------
 # Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
-# `pirl reproduce` does around it and how the physics simulator evaluates it. Everything else
+# `pirl reproduce` does around it, how the physics simulator evaluates it and the memory limit
+# of its worlds (env.max_memory_gb, a property of the machine). Everything else
 # that the method uses (PARE and the advisor for PIRL only) must match the run's config.yaml.
-RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.")
+RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.", "env.max_memory_gb")
 
 
 def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
