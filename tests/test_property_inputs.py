@@ -120,7 +120,7 @@ sides = st.integers(-3, 9) | st.sampled_from([2049, 10**6])
 option_text = st.text(alphabet="-0123456789xab.", min_size=1, max_size=6)
 
 
-@settings(max_examples=40, deadline=None, database=None)
+@settings(max_examples=25, deadline=None, database=None)
 @given(
     size=st.tuples(sides | option_text, sides | option_text, st.integers(-1, 4) | option_text),
     seed=st.integers(-(2**33), 2**33) | option_text,

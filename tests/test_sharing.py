@@ -352,17 +352,17 @@ def test_the_memory_limit_is_a_setting():
 
 
 # -- 4-6. seeds, method options, one-line errors -----------------------------------------------
-@pytest.mark.parametrize("seed", ["-1", "4294967296"])
-def test_seeds_out_of_range_are_refused_before_any_folder(tmp_path, seed):
+def test_seeds_out_of_range_are_refused_before_any_folder(tmp_path):
     out = tmp_path / "run"
-    proc = _pirl(
-        "train", "--method", "ppo-sr", "--config", "test", "--seed", seed, "--out", str(out),
-        cwd=tmp_path,
-    )  # fmt: skip
-    _one_line(proc, f"--seed {seed}", "4294967295")
-    assert not out.exists()
-    _one_line(_pirl("render", "--seed", seed, "--out", "x.gif", cwd=tmp_path), "--seed")
-    _one_line(_pirl("advise", "--advisor", "oracle", "--seed", seed, cwd=tmp_path), "--seed")
+    for seed in ("-1", "4294967296"):
+        proc = _pirl(
+            "train", "--method", "ppo-sr", "--config", "test", "--seed", seed, "--out", str(out),
+            cwd=tmp_path,
+        )  # fmt: skip
+        _one_line(proc, f"--seed {seed}", "4294967295")
+        assert not out.exists()
+    _one_line(_pirl("render", "--seed", "-1", "--out", "x.gif", cwd=tmp_path), "--seed")
+    _one_line(_pirl("advise", "--advisor", "oracle", "--seed", "-1", cwd=tmp_path), "--seed")
 
 
 def test_a_run_that_failed_before_its_first_checkpoint_starts_again(tmp_path):
@@ -377,20 +377,24 @@ def test_a_run_that_failed_before_its_first_checkpoint_starts_again(tmp_path):
 
 
 def test_options_a_method_does_not_use_are_refused(runs, tmp_path):
-    cases = [
-        (["--method", "ppo-sr", "--expert", str(runs["done"])], "--expert", "ppo-sr"),
-        (["--method", "ppo-ewri", "--advisor", "oracle"], "--advisor", "ppo-ewri"),
-        (["--method", "il", "--student", str(tmp_path)], "--student", "il"),
-    ]
-    for args, *needles in cases:
-        proc = _pirl("train", *args, "--config", "test", "--out", str(tmp_path / "r"), cwd=tmp_path)
-        _one_line(proc, *needles)
+    from pirl.agents.runs import train_run
+
+    proc = _pirl(
+        "train", "--method", "ppo-sr", "--expert", str(runs["done"]), "--config", "test",
+        "--out", str(tmp_path / "r"), cwd=tmp_path,
+    )  # fmt: skip
+    _one_line(proc, "--expert", "ppo-sr")
+    with pytest.raises(ConfigError, match="--advisor is not an option of --method ppo-ewri"):
+        train_run("ppo-ewri", tmp_path / "r", TEST_CFG, TEST_CFG, advisor="oracle")
+    with pytest.raises(ConfigError, match="--student is not an option of --method il"):
+        train_run("il", tmp_path / "r", TEST_CFG, TEST_CFG, student=tmp_path)
     assert not (tmp_path / "r").exists()
 
 
-def test_il_refuses_an_expert_of_another_method(tmp_path):
-    expert = tmp_path / "sr"
-    train("ppo-sr", RunConfig.from_yaml(TEST_CFG), expert, seed=0, show_progress=False)
+def test_il_refuses_an_expert_of_another_method(runs, tmp_path):
+    expert = _copy(runs["done"], tmp_path / "sr")
+    meta = json.loads((expert / "meta.json").read_text())
+    (expert / "meta.json").write_text(json.dumps({**meta, "method": "ppo-sr"}))
     proc = _pirl(
         "train", "--method", "il", "--config", "test", "--expert", str(expert),
         "--out", str(tmp_path / "il"), cwd=tmp_path,
