@@ -86,7 +86,7 @@ def test_failed_and_unparseable_answers_are_never_cached(tmp_path: Path) -> None
     a = cached.advise(["fail 1", "junk 1", "ok"])
     assert a[0].error == "server on fire" and a[1].recommendation is None and a[2].ok
     b = cached.advise(["fail 1", "junk 1", "ok"])
-    assert inner.batches[-1] == ["fail 1", "junk 1"]  # both asked again (issue 15)
+    assert inner.batches[-1] == ["fail 1", "junk 1"]  # both asked again
     assert [x.from_cache for x in b] == [False, False, True]
     assert b[1].text == "no idea" and b[1].recommendation is None
 

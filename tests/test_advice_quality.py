@@ -1,4 +1,4 @@
-"""How good must the LLM be (issue 28): the degradable oracle, ``pirl advise --score``, your
+"""How good must the LLM be: the degradable oracle, ``pirl advise --score``, your
 own prompt as a template, and the student's gate on what it learned of the teacher's signal.
 Real advisors throughout: the oracle, the embedded LLM, an OpenAI-compatible server on
 loopback (the plugin advisor is scored in tests/test_plugins.py)."""

@@ -105,7 +105,7 @@ def test_longest_tasks_are_handed_out_first():
     assert areas == sorted(areas, reverse=True) and areas[0] == 900
 
 
-# -- act modes, batching, seeds as the unit (issue 10) ---------------------------------------
+# -- act modes, batching, seeds as the unit -------------------------------------------------
 @pytest.fixture(scope="module")
 def trained_runs(tmp_path_factory):
     """Two tiny PPO-EWRI runs (seeds 0 and 1) on the test preset."""

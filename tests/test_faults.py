@@ -1,4 +1,4 @@
-"""Faults never stick (issue 15): answers cached per server and only when they parse, damaged
+"""Faults never stick: answers cached per server and only when they parse, damaged
 or unusable caches degrade in one line, one writer per folder, deadlines on a silent server,
 any path, OS errors in one line, Ctrl-C in one line. Real subprocesses, real SQLite files and
 OpenAI-compatible fake servers on 127.0.0.1 only."""

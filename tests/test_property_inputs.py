@@ -1,4 +1,4 @@
-"""What users type, generated (issue 26): YAML documents fed to the config loader, option
+"""What users type, generated: YAML documents fed to the config loader, option
 values fed to the command line's parsing. Each ends in a config, or in one ConfigError /
 UserError line (exit 2 on the command line); never in another exception or a traceback."""
 

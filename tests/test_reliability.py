@@ -1,4 +1,4 @@
-"""Runs that cannot go wrong (issue 11): user mistakes answered in one line with nothing
+"""Runs that cannot go wrong: user mistakes answered in one line with nothing
 half-made, resume that continues the run in the folder (kill -9 included), results that never
 mix, every setting reachable, quiet output. CLI cases run as real subprocesses."""
 

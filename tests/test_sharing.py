@@ -1,4 +1,4 @@
-"""Safe to share, bounded everywhere (issue 26): a run folder, checkpoint or student from anyone
+"""Safe to share, bounded everywhere: a run folder, checkpoint or student from anyone
 loads without running code; answers and worlds have limits; every mistake is one line. The
 payloads are real pickles that would write a marker file; CLI cases run as real subprocesses
 and the LLM server is a real HTTP server on loopback."""

@@ -133,7 +133,7 @@ def _oracle(cfg: RunConfig) -> Advisor:
     return OracleAdvisor(cfg.advisor.oracle_accuracy)
 
 
-# Rates: issue 18's demo (student mode: oracle 60 s, embedded LLM 127 s beside PPO's 45 s;
+# Rates: the demo's measurement (student mode: oracle 60 s, embedded LLM 127 s beside PPO's 45 s;
 # a teacher phase of the embedded model 160 answers in 94 s) and an estimated 20 s per batch
 # of embedded-LLM answers in sync PARE (docs/deviations.md).
 BUILTIN: dict[str, AdvisorKind] = {

@@ -314,7 +314,7 @@ def _train_parallel(
 
 
 # Rates on the 2-core development machine, one worker process each, shared with other jobs.
-# Measured (issue 10, quick profile in 2 workers): PPO steps/s at quick's network (262,144
+# Measured (quick profile in 2 workers): PPO steps/s at quick's network (262,144
 # steps in 45 s: 5,800/s; 5,000 leaves room for a busy machine), PIRL's cost against PPO in
 # student mode (157 s with the embedded-LLM teacher, 165 s with the oracle's), batched grid
 # evaluation at 30x30x3 (145 episodes/s, benchmarks/eval_throughput.py; other sizes scale
