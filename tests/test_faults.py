@@ -20,6 +20,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from chat_server import completion_body
+
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
 PIRL = [sys.executable, "-m", "pirl"]
@@ -43,12 +45,8 @@ class FakeLLM:
                 if fake.hang and fake.requests > fake.answer_first:
                     fake.stopping.wait(600)  # accepted, never answered
                     return
-                body = json.dumps({
-                    "id": "x", "object": "chat.completion", "created": 0, "model": "m",
-                    "choices": [{"index": 0, "finish_reason": "stop",
-                                 "message": {"role": "assistant", "content": fake.reply}}],
-                    "usage": {"prompt_tokens": 3, "completion_tokens": 5, "total_tokens": 8},
-                }).encode()  # fmt: skip
+                usage = {"prompt_tokens": 3, "completion_tokens": 5, "total_tokens": 8}
+                body = completion_body(fake.reply, usage)
                 self.send_response(200)
                 self.send_header("content-type", "application/json")
                 self.send_header("content-length", str(len(body)))

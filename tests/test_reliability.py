@@ -19,6 +19,7 @@ import pytest
 import torch
 import yaml
 
+from cli_checks import one_error_line as _one_clean_line
 from pirl.agents import checkpoint
 from pirl.agents.loading import load_model
 from pirl.agents.train import train
@@ -38,17 +39,6 @@ def _pirl(*args: str, cwd: Path, env: dict | None = None) -> subprocess.Complete
     return subprocess.run(
         [*PIRL, *args], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
     )
-
-
-def _one_clean_line(proc: subprocess.CompletedProcess, *needles: str) -> str:
-    """Exit code 2, no traceback, exactly one line on stderr holding every needle."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    assert "Traceback" not in proc.stderr + proc.stdout
-    lines = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, proc.stderr
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
 
 
 def _same_weights(a: Path, b: Path) -> bool:

@@ -23,6 +23,7 @@ import torch
 import yaml
 
 from chat_server import ChatServer
+from cli_checks import one_error_line as _one_line
 from pirl.agents import checkpoint
 from pirl.agents.train import train
 from pirl.config import safe_state
@@ -40,17 +41,6 @@ def _pirl(*args: str, cwd: Path, env: dict | None = None, timeout: float = 300):
     return subprocess.run(
         [*PIRL, *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env
     )
-
-
-def _one_line(proc: subprocess.CompletedProcess, *needles: str) -> str:
-    """Exit 2, no traceback, exactly one line on stderr holding every needle."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    assert "Traceback" not in proc.stdout + proc.stderr
-    lines = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, proc.stderr
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
 
 
 class Payload:

@@ -655,19 +655,13 @@ def _score(
     )
     console.print(price.line(), markup=False)
     if out is not None:
-        data = {**result.to_dict(), "price": dataclasses_asdict(price), "seed": seed,
+        data = {**result.to_dict(), "price": price.to_dict(), "seed": seed,
                 "prompt_variant": cfg.pare.prompt_variant}  # fmt: skip
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(out.name + ".tmp")
         tmp.write_text(json.dumps(data, indent=2))
         tmp.replace(out)
         console.print(f"wrote {out}")
-
-
-def dataclasses_asdict(obj: Any) -> dict[str, Any]:
-    import dataclasses
-
-    return dataclasses.asdict(obj)
 
 
 def _copies_format_example(rec: Any, prompt: str) -> bool:

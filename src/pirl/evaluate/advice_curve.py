@@ -15,8 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pirl.evaluate.summary import interval_estimates, probability_of_improvement, seed_scores
 
 
@@ -174,16 +172,11 @@ def section(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], act
     return "\n".join(lines) + "\n"
 
 
-def mean_or_none(values: Sequence[float]) -> float | None:
-    return float(np.mean(values)) if values else None
-
-
 __all__ = [
     "CurveAdvisor",
     "CurvePoint",
     "break_even",
     "curve_points",
-    "mean_or_none",
     "plot",
     "section",
 ]

@@ -97,6 +97,9 @@ class RunPrice:
     cost: float | None
     """In the currency of the prices given, None without prices."""
 
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
     def line(self) -> str:
         money = "" if self.cost is None else f", cost {self.cost:,.2f}"
         return (
