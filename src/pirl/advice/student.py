@@ -299,8 +299,9 @@ class Student:
 
     About one row in five is held out for scoring (chosen by a checksum of its features, so
     the split does not depend on row ids or on who stored the row); the rest trains.
-    :meth:`fit` runs a fixed number of Adam steps on seeded minibatches, warm-started, so a run
-    refits the same way every time it meets the same data.
+    :meth:`fit` runs a fixed number of Adam steps on seeded minibatches, warm-started or, with
+    ``fresh``, from the seed's initial weights, so a run refits the same way every time it
+    meets the same data.
     """
 
     def __init__(
@@ -315,10 +316,8 @@ class Student:
     ) -> None:
         self.teacher, self.n_features, self.label = teacher, int(n_features), label
         self.hidden, self.lr, self.batch_size = int(hidden), float(lr), int(batch_size)
-        with torch.random.fork_rng():
-            torch.manual_seed(seed)
-            self.net = StudentNet(self.n_features, self.hidden)
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=self.lr)
+        self.seed = int(seed)
+        self._initial_weights()
         self.gen = torch.Generator().manual_seed(seed)
         self.last_id = 0
         self._ids = np.zeros(0, dtype=np.int64)
@@ -327,6 +326,12 @@ class Student:
         self._y = np.zeros((0, len(FIELDS)), dtype=np.int64)
         self.fitted_rows = 0
         self.score = StudentScore(0.0, 0.0, 0, {})
+
+    def _initial_weights(self) -> None:
+        with torch.random.fork_rng():
+            torch.manual_seed(self.seed)
+            self.net = StudentNet(self.n_features, self.hidden)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=self.lr)
 
     # -- data -------------------------------------------------------------------------------
     @property
@@ -358,8 +363,15 @@ class Student:
         return np.flatnonzero(~self._held), np.flatnonzero(self._held)
 
     # -- learning ---------------------------------------------------------------------------
-    def fit(self, steps: int) -> StudentScore:
-        """``steps`` Adam steps on the training rows, then score on the held-out rows."""
+    def fit(self, steps: int, fresh: bool = False) -> StudentScore:
+        """``steps`` Adam steps on the training rows, then score on the held-out rows.
+
+        ``fresh``: start from the seed's initial weights and a new optimizer. Warm-started
+        refits on a noisy teacher's first few hundred answers memorise its noise and stay
+        there as answers pile up; a fresh fit on all of them learns what they share.
+        """
+        if fresh:
+            self._initial_weights()
         train, _ = self._split()
         if len(train):
             x = torch.from_numpy(self._x[train])
@@ -439,6 +451,7 @@ class Student:
             "hidden": self.hidden,
             "lr": self.lr,
             "batch_size": self.batch_size,
+            "seed": self.seed,
             "net": {k: v.clone() for k, v in self.net.state_dict().items()},
             "opt": copy.deepcopy(self.opt.state_dict()),
             "gen": self.gen.get_state(),
@@ -496,7 +509,7 @@ class Student:
             raise ValueError(f"{path} holds no student")
         student = cls(
             state["teacher"], state["n_features"], state["label"], state["hidden"], state["lr"],
-            state["batch_size"],
+            state["batch_size"], int(state.get("seed", 0)),
         )  # fmt: skip
         student.load_state_dict(state, dataset, strict=False)
         return student

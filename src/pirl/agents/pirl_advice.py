@@ -180,6 +180,8 @@ def make_student(
 
     dataset = TeacherDataset(dataset_path(cfg))
     key = teacher_key(advisor, cfg.pare.prompt_variant, env_cfg)
+    if cfg.pare.student_dataset_scope == "seed":
+        key += f":seed{seed}"
     if student_path is not None:
         path = Path(student_path)
         file = path / STUDENT_FILE if path.is_dir() else path

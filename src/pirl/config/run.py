@@ -154,6 +154,10 @@ class PareSettings(Settings, section="pare"):
     """Student mode: width of the student's two hidden layers."""
     student_dataset: str = ""
     """Teacher answers with their states; empty = student.sqlite beside the answer cache."""
+    student_dataset_scope: str = "shared"
+    """Student mode: 'shared': every run of the same teacher and settings learns from every
+    answer stored so far (a later seed starts with an earlier seed's answers); 'seed': each
+    training seed keeps its own answers, so seeds replicate independently (studies)."""
     student_wait_teacher: bool = False
     """Student mode: wait for the teacher's batch at each rollout boundary (reproducible runs;
     PPO then waits for a slow teacher)."""
@@ -182,6 +186,7 @@ class PareSettings(Settings, section="pare"):
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
             self.require_choice("prompt_variant", ("paper", "compact"))
         self.require_choice("student_gate_on", ("kappa", "agreement"))
+        self.require_choice("student_dataset_scope", ("shared", "seed"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
             "min_shaped", "student_kappa_gate",
