@@ -67,7 +67,15 @@ class VCPPConfig(Settings, section="env"):
     """Every setting of the VCPP world and environment (docs/design.md)."""
 
     size: tuple[int, int, int] = BASE_SIZE
-    """Grid size (X, Y, Z) in cells; each at least 3."""
+    """Grid size (X, Y, Z) in cells; each at least 3 (a site's own size when ``site`` is set)."""
+    site: str = ""
+    """A site folder (docs/sites.md): the map is the site's instead of drawn spheres, and
+    resets draw a start from its start cells. Set with ``--site``, which also sets ``size``
+    and ``ground_cells`` from the site."""
+    ground_cells: int = 0
+    """Ground cells that battery capacity and the step limit scale with; 0 = X * Y. A site
+    sets its seeable cells, so a site with much blocked ground gets the budget of the ground
+    there is to see."""
     footprint: str = "paper"
     """Camera footprint model: 'paper' (square, the paper's simulator) or 'frustum' (pinhole)."""
     occlusion: bool = False
@@ -153,6 +161,8 @@ class VCPPConfig(Settings, section="env"):
             raise ConfigError(
                 f"{self.where('size')}={size!r} is impossible: every side must be >= 3 cells"
             )
+        if self.ground_cells < 0:
+            raise self.refuse("ground_cells", "must be >= 0 (0: X * Y)")
         if max(size) > 2048:
             raise self.refuse("size", "sides above 2048 cells are not supported")
         if not (math.isfinite(self.max_memory_gb) and self.max_memory_gb >= 0):
@@ -223,7 +233,8 @@ class VCPPConfig(Settings, section="env"):
     def alpha(self) -> float:
         """Size scale factor relative to the 15x15x3 training world."""
         x, y, z = self.size
-        return (x * y * z) / (BASE_SIZE[0] * BASE_SIZE[1] * BASE_SIZE[2])
+        ground = self.ground_cells or x * y
+        return (ground * z) / (BASE_SIZE[0] * BASE_SIZE[1] * BASE_SIZE[2])
 
     @property
     def capacity(self) -> float:

@@ -34,23 +34,24 @@ from pirl.world.footprint import (
 
 
 @numba.njit(cache=True)
-def footprint_cells_pose(lens, pose, obstacles, out):
+def footprint_cells_pose(lens, pose, obstacles, occluding, out):
     """Ground cells seen from a continuous :class:`~pirl.world.footprint.CameraPose`, written
     as rows (i, j) of ``out``; the count.
 
     ``pose.x, pose.y`` are in cell units (cell (i, j) is centred at (i, j)); ``pose.z`` is the
     height above the ground in cell units minus one (the grid's level convention, so level k
-    is ``z = k``); tilt and pan are degrees (floats); ``obstacles`` in the same units.
+    is ``z = k``); tilt and pan are degrees (floats); ``obstacles`` in the same units;
+    ``occluding`` the world's voxels (used where there are no spheres).
     """
     if lens.model == PAPER:
         cell = CameraPose(
             int(math.floor(pose.x + 0.5)), int(math.floor(pose.y + 0.5)), 0,
             int(math.floor(pose.tilt + 0.5)), 0, pose.zoom10,
         )  # fmt: skip
-        return footprint_cells(lens, cell, obstacles, out)
+        return footprint_cells(lens, cell, obstacles, occluding, out)
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
 
 
 def body_rotation(rpy: np.ndarray) -> np.ndarray:

@@ -53,7 +53,7 @@ from pirl.env.info import InfoSnapshot
 from pirl.env.observation import build_observations, obs_layout, obs_size_for
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
-from pirl.world.footprint import FRUSTUM, PAPER, CameraPose, buffer_rows
+from pirl.world.footprint import PAPER, CameraPose, buffer_rows, footprint_model
 from pirl.world.metrics import episode_metrics
 from pirl.world.state import Scenario, WorldBatch, draw_scenario
 
@@ -136,7 +136,7 @@ class Mission:
                 f"size={env_cfg.size}, max_steps={env_cfg.max_steps}: the step limit scaled by "
                 f"alpha={env_cfg.alpha:.3g} rounds to 0; raise max_steps or set scale_by_alpha"
             )
-        self.model = PAPER if env_cfg.footprint == "paper" else FRUSTUM
+        self.model = footprint_model(env_cfg.footprint)
         self.obs = np.zeros((1, obs_size_for(env_cfg)), np.float32)
         self._layout = obs_layout(env_cfg)
         self._buf = np.empty((buffer_rows(self.model, env_cfg.max_range), 2), dtype=np.int64)
@@ -332,7 +332,9 @@ class Mission:
             # Height above the ground in horizontal cell sizes, minus one (the grid's levels).
             z = float(pose.position[2]) / self.physics.cell_size_m - 1.0
         at = CameraPose(float(x), float(y), z, t_eff, p_eff, int(zoom10))
-        n = footprint_cells_pose(self.world.lens, at, self._geo_obstacles, self._buf)
+        n = footprint_cells_pose(
+            self.world.lens, at, self._geo_obstacles, self.world.occluding[0], self._buf
+        )
         return self._buf[:n]
 
     def sample(self, pose: Pose) -> int:

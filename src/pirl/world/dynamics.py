@@ -124,7 +124,9 @@ def observe(w, p, e, mark_redundant):
     """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
     st = w.status[e]
     buf = w.buf[e]
-    n = footprint_cells(p, camera_pose(w, e), w.obstacles[e, : st["n_obstacles"]], buf)
+    n = footprint_cells(
+        p, camera_pose(w, e), w.obstacles[e, : st["n_obstacles"]], w.occluding[e], buf
+    )
     st["footprint_sum"] += n
     return book_view(w, e, buf[:n], mark_redundant)
 

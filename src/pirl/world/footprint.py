@@ -6,7 +6,9 @@ so the single and batched environments, the renderer and the planners use the sa
 - ``paper``: a square centred on the UAV, half-width ``floor(m * zoom + 0.5)`` with ``m = 2``
   when tilt < 80 degrees and ``m = 1`` otherwise (altitude and pan do not matter).
 - ``frustum``: a pinhole camera at the cell centre, ``z + 1`` cells above the ground, the four
-  corner rays intersected with the ground (cut at ``max_range``), optional occlusion by spheres.
+  corner rays intersected with the ground (cut at ``max_range``), optional occlusion: by the
+  obstacle spheres of a generated world (the paper's geometry, exactly), or, in a world of
+  voxels (a site), by a ray march through its occluding cells.
 
 Coordinates: cell ``(x, y, z)`` has its centre at ``(x, y, z)``; the ground plane lies at
 ``z = -1`` so a UAV in level ``z`` flies ``z + 1`` cells above it.
@@ -24,6 +26,19 @@ PAPER = 0
 FRUSTUM = 1
 # A square of half-width 4 (zoom 2.0, tilt < 80) is the largest paper footprint.
 PAPER_MAX_HALF = 4
+
+
+MODELS = {"paper": PAPER, "frustum": FRUSTUM}
+"""Each footprint model's name (``env.footprint``) and number."""
+
+
+def footprint_model(name: str) -> int:
+    """The number of the footprint model called ``name`` (one of :data:`MODELS`)."""
+    return MODELS[name]
+
+
+NO_VOXELS = np.zeros((0, 0, 0), dtype=np.bool_)
+"""The occluding grid of a footprint without voxels (:func:`footprint_cells`)."""
 
 
 class Lens(NamedTuple):
@@ -149,13 +164,53 @@ def _occluded(cx, cy, cz, gx, gy, obstacles):
 
 
 @numba.njit(cache=True)
-def footprint_cells(lens, pose, obstacles, out):
+def _occluded_voxels(cx, cy, cz, gx, gy, occluding):
+    """True when the segment camera -> ground cell centre passes through an occluding voxel
+    (other than those of the target cell's own column: a roof is seen, not hidden by itself).
+
+    A 3-D DDA (Amanatides and Woo) over voxels centred at integer coordinates; the ground
+    plane is at z = -1, below level 0.
+    """
+    sx, sy, sz = occluding.shape
+    if sx == 0:
+        return False
+    dx, dy, dz = gx - cx, gy - cy, -1.0 - cz
+    px, py, pz = cx + 0.5, cy + 0.5, cz + 0.5
+    i, j, k = int(math.floor(px)), int(math.floor(py)), int(math.floor(pz))
+    ti, tj = int(gx), int(gy)
+    inf = 1e30
+    si = 1 if dx > 0 else -1
+    sj = 1 if dy > 0 else -1
+    tdx = abs(1.0 / dx) if dx != 0.0 else inf
+    tdy = abs(1.0 / dy) if dy != 0.0 else inf
+    tdz = abs(1.0 / dz) if dz != 0.0 else inf
+    tx = ((i + 1 - px) if dx > 0 else (px - i)) * tdx if dx != 0.0 else inf
+    ty = ((j + 1 - py) if dy > 0 else (py - j)) * tdy if dy != 0.0 else inf
+    tz = (pz - k) * tdz if dz != 0.0 else inf
+    while True:
+        if tx <= ty and tx <= tz:
+            t, i, tx = tx, i + si, tx + tdx
+        elif ty <= tz:
+            t, j, ty = ty, j + sj, ty + tdy
+        else:
+            t, k, tz = tz, k - 1, tz + tdz
+        if t >= 1.0 or k < 0:
+            return False
+        if i < 0 or j < 0 or i >= sx or j >= sy or k >= sz:
+            continue
+        if (i != ti or j != tj) and occluding[i, j, k]:
+            return True
+
+
+@numba.njit(cache=True)
+def footprint_cells(lens, pose, obstacles, occluding, out):
     """Write the ground cells ``pose`` sees through ``lens`` as rows (i, j) of ``out``; return
     their count.
 
     ``lens`` is a :class:`Lens` or a tuple with its fields (a world's ``Params``); ``pose`` a
     grid :class:`CameraPose` (integers); ``obstacles`` the rows (cx, cy, cz, r) that may
-    occlude. ``out`` must hold at least :func:`buffer_rows` rows.
+    occlude; ``occluding`` the (X, Y, Z) voxels that occlude when there are no spheres (a
+    (0, 0, 0) array for none). ``out`` must hold at least :func:`buffer_rows` rows.
     """
     if lens.model == PAPER:
         n = 0
@@ -169,13 +224,15 @@ def footprint_cells(lens, pose, obstacles, out):
         return n
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
 
 
 @numba.njit(cache=True)
-def frustum_scan(lens, pose, poly, obstacles, out):
+def frustum_scan(lens, pose, poly, obstacles, occluding, out):
     """Write the ground cells inside ground polygon ``poly`` (seen from ``pose``, occluded by
-    ``obstacles`` when the lens says so) as rows of ``out``; return their count."""
+    ``obstacles``, or by ``occluding`` voxels where there are no spheres, when the lens says
+    so) as rows of ``out``; return their count."""
+    spheres = obstacles.shape[0] > 0
     x0 = max(0, int(math.floor(poly[:, 0].min())))
     x1 = min(lens.size_x - 1, int(math.ceil(poly[:, 0].max())))
     y0 = max(0, int(math.floor(poly[:, 1].min())))
@@ -184,8 +241,12 @@ def frustum_scan(lens, pose, poly, obstacles, out):
     for i in range(x0, x1 + 1):
         for j in range(y0, y1 + 1):
             if _inside(i, j, poly):
-                if lens.occlusion and _occluded(pose.x, pose.y, pose.z, i, j, obstacles):
-                    continue
+                if lens.occlusion:
+                    if spheres:
+                        if _occluded(pose.x, pose.y, pose.z, i, j, obstacles):
+                            continue
+                    elif _occluded_voxels(pose.x, pose.y, pose.z, i, j, occluding):
+                        continue
                 out[n, 0] = i
                 out[n, 1] = j
                 n += 1
@@ -204,13 +265,14 @@ def max_footprint_cells(model: int, size_z: int, fov_deg: float, max_range: floa
     out = np.empty((side * side, 2), dtype=np.int64)
     empty = np.zeros((0, 4))
     lens = lens_of(FRUSTUM, (side, side), fov_deg, max_range, False)
+    no_voxels = NO_VOXELS
     best = 0
     for z in range(size_z):
         for tilt in range(0, 91, 5):
             for pan in (0, 45):
                 for zoom10 in range(5, 21):
                     pose = CameraPose(span, span, z, tilt, pan, zoom10)
-                    best = max(best, footprint_cells(lens, pose, empty, out))
+                    best = max(best, footprint_cells(lens, pose, empty, no_voxels, out))
     return best
 
 

@@ -18,7 +18,13 @@ import numpy as np
 
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
-from pirl.world.footprint import FRUSTUM, PAPER, CameraPose, buffer_rows, footprint_cells, lens_of
+from pirl.world.footprint import (
+    CameraPose,
+    buffer_rows,
+    footprint_cells,
+    footprint_model,
+    lens_of,
+)
 from pirl.world.state import WorldBatch
 
 Cell = tuple[int, int, int]
@@ -37,6 +43,7 @@ class WorldView:
     coverable: np.ndarray
     views: np.ndarray
     obstacles: np.ndarray
+    occluding: np.ndarray
     position: Cell
     camera: Camera
     energy: float
@@ -51,6 +58,7 @@ class WorldView:
             coverable=take(world.coverable[e]),
             views=take(world.views[e]),
             obstacles=world.obstacle_list(e),
+            occluding=take(world.occluding[e]),
             position=world.position(e),
             camera=world.camera_setting(e),
             energy=float(world.energy[e]),
@@ -59,11 +67,13 @@ class WorldView:
     def footprint(self, pose: Cell, camera: Camera) -> np.ndarray:
         """Ground cells (k, 2) seen from ``pose`` with ``camera``."""
         cfg = self.cfg
-        model = PAPER if cfg.footprint == "paper" else FRUSTUM
+        model = footprint_model(cfg.footprint)
         lens = lens_of(model, cfg.size, cfg.fov_deg, cfg.max_range, cfg.occlusion)
         buf = np.empty((buffer_rows(model, cfg.max_range), 2), dtype=np.int64)
         at = CameraPose(*(int(v) for v in pose), *(int(v) for v in camera))
-        n = footprint_cells(lens, at, np.asarray(self.obstacles, dtype=np.float64), buf)
+        n = footprint_cells(
+            lens, at, np.asarray(self.obstacles, dtype=np.float64), self.occluding, buf
+        )
         return buf[:n]
 
     def useful(self, pose: Cell, camera: Camera) -> bool:
@@ -144,7 +154,7 @@ def _largest_footprint_camera(cfg: VCPPConfig, z: int, camera: Camera) -> tuple[
     tilt0, pan0, zoom0 = camera
     empty = WorldView(
         cfg, np.zeros((0, 0, 0), bool), np.zeros((0, 0), bool), np.zeros((0, 0), np.int32),
-        np.zeros((0, 4)), (0, 0, z), camera, 0.0,
+        np.zeros((0, 4)), np.zeros((0, 0, 0), bool), (0, 0, z), camera, 0.0,
     )  # fmt: skip
     centre = (sx // 2, sy // 2)
     altitudes = [z] if cfg.footprint == "paper" else range(sz)

@@ -23,14 +23,14 @@ from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
 from pirl.world.footprint import (
-    FRUSTUM,
-    PAPER,
     CameraPose,
     buffer_rows,
     footprint_cells,
+    footprint_model,
     lens_of,
     max_footprint_cells,
 )
+from pirl.world.grids import MapGrids
 from pirl.world.memory import check_memory
 
 _MAX_SCENARIO_TRIES = 200
@@ -64,7 +64,7 @@ FLAGS_DTYPE = np.dtype(
 
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
-    "blk_total", "obstacles", "terms", "flags",
+    "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -77,7 +77,12 @@ def copy_records(records: np.ndarray) -> np.ndarray:
 
 
 class WorldArrays(NamedTuple):
-    """The arrays of N worlds of one size (first axis = world), as the kernels take them."""
+    """The arrays of N worlds of one size (first axis = world), as the kernels take them.
+
+    The map (``blocked``, ``occluding``, ``coverable``, ``obstacles``) is kept apart from the
+    UAV's own state (``status``, ``energy``, ``rng``) and the task's bookkeeping (``views``,
+    ``redmask``, ``visits``, ``blk_*``).
+    """
 
     status: np.ndarray
     """(N,) records of :data:`STATUS_DTYPE`: pose, camera and counters. ``status[e]["x"]``
@@ -102,6 +107,12 @@ class WorldArrays(NamedTuple):
     """(N, G, G) coverable cells of each coarse block."""
     obstacles: np.ndarray
     """(N, max_obstacles, 4) spheres (cx, cy, cz, radius); ``status["n_obstacles"]`` are used."""
+    occluding: np.ndarray
+    """(N, X, Y, Z) cells that hide the ground behind them where a world has no spheres (a
+    site's buildings); equal to ``blocked`` in a sphere world, whose spheres occlude exactly."""
+    coverable_all: np.ndarray
+    """(N,) coverable cells of the world's site, seeable or not (= the coverable count of a
+    sphere world)."""
     terms: np.ndarray
     """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
@@ -161,13 +172,16 @@ class Params(NamedTuple):
 
 @dataclass(frozen=True)
 class Scenario:
-    """What a seed fixes about an episode: obstacles, start cell and the wind stream."""
+    """What a seed fixes about an episode: the map (obstacle spheres, or a site's grids), the
+    start cell and the wind stream."""
 
     obstacles: np.ndarray  # (n, 4): cx, cy, cz, radius in cell units
     start: tuple[int, int, int]
     wind_seed: int
     camera: tuple[int, int, int] | None = None
     """Starting (tilt, pan, zoom tenths) if drawn (``start_camera``); else the config's."""
+    grids: MapGrids | None = None
+    """The site's map when the world is a site (then ``obstacles`` is empty)."""
 
 
 @numba.njit(cache=True)
@@ -193,8 +207,18 @@ def blocked_grid(size: tuple[int, int, int], obstacles: np.ndarray) -> np.ndarra
 def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
     """Draw obstacles, a free start cell and the wind seed from ``rng``.
 
-    Obstacle layouts that leave no free cell or no coverable ground are drawn again.
+    Obstacle layouts that leave no free cell or no coverable ground are drawn again. On a site
+    (``cfg.site``) the map is the site's and only the start (from its start cells), the wind
+    and the camera are drawn.
     """
+    if cfg.site:
+        from pirl.world.seeable import site_grids
+
+        grids = site_grids(cfg)
+        start = grids.starts[int(rng.integers(len(grids.starts)))]
+        wind_seed = int(rng.integers(0, 2**63 - 1))
+        start_cell = (int(start[0]), int(start[1]), int(start[2]))
+        return Scenario(np.zeros((0, 4)), start_cell, wind_seed, _draw_camera(cfg, rng), grids)
     sx, sy, sz = cfg.size
     lo, hi = cfg.obstacle_count_range
     span = np.array([sx - 1, sy - 1, sz - 1], dtype=np.float64)
@@ -208,14 +232,7 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
         if free.size and not blocked[:, :, 0].all():
             start = np.unravel_index(free[int(rng.integers(free.size))], cfg.size)
             wind_seed = int(rng.integers(0, 2**63 - 1))
-            camera = None
-            # Drawn last, and only when asked: fixed-start scenarios stay the same.
-            if cfg.start_camera == "random" or (cfg.start_camera == "mixed" and rng.random() < 0.5):
-                camera = (
-                    int(rng.choice(grid.tilt_steps())),
-                    int(rng.choice(grid.pan_steps())),
-                    int(rng.integers(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1)),
-                )
+            camera = _draw_camera(cfg, rng)
             start_cell = (int(start[0]), int(start[1]), int(start[2]))
             return Scenario(obstacles, start_cell, wind_seed, camera)
     raise ConfigError(
@@ -223,6 +240,17 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
         f"{cfg.radius_min}-{cfg.radius_max} and keep a free cell and coverable ground; "
         "use a larger world or smaller/fewer obstacles"
     )
+
+
+def _draw_camera(cfg: VCPPConfig, rng: np.random.Generator) -> tuple[int, int, int] | None:
+    # Drawn last, and only when asked: fixed-start scenarios stay the same.
+    if cfg.start_camera == "random" or (cfg.start_camera == "mixed" and rng.random() < 0.5):
+        return (
+            int(rng.choice(grid.tilt_steps())),
+            int(rng.choice(grid.pan_steps())),
+            int(rng.integers(grid.ZOOM_MIN10, grid.ZOOM_MAX10 + 1)),
+        )
+    return None
 
 
 @numba.njit(cache=True)
@@ -266,7 +294,7 @@ class WorldBatch:
         self.num = num
         sx, sy, sz = cfg.size
         g = cfg.obs_global
-        self.model = PAPER if cfg.footprint == "paper" else FRUSTUM
+        self.model = footprint_model(cfg.footprint)
         self.capacity = float(cfg.capacity)
         self.step_limit = int(cfg.step_limit)
         self.max_obstacles = max(1, cfg.obstacle_count_range[1])
@@ -285,6 +313,8 @@ class WorldBatch:
             blk_todo=np.zeros((num, g, g), dtype=np.int32),
             blk_total=np.zeros((num, g, g), dtype=np.int32),
             obstacles=np.zeros((num, self.max_obstacles, 4), dtype=np.float64),
+            occluding=np.zeros((num, sx, sy, sz), dtype=np.bool_),
+            coverable_all=np.zeros(num, dtype=np.int64),
             terms=np.zeros((num, D.N_TERMS), dtype=np.float64),
             flags=np.zeros(num, dtype=FLAGS_DTYPE),
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
@@ -334,7 +364,15 @@ class WorldBatch:
         n = len(scenario.obstacles)
         if n > self.max_obstacles:
             raise ConfigError(f"scenario has {n} obstacles; this world holds {self.max_obstacles}")
-        blocked = blocked_grid(cfg.size, scenario.obstacles)
+        grids = scenario.grids
+        if grids is not None:
+            if grids.blocked.shape != tuple(cfg.size):
+                raise ConfigError(
+                    f"site {grids.name} is {grids.blocked.shape}, this world {tuple(cfg.size)}"
+                )
+            blocked = grids.blocked
+        else:
+            blocked = blocked_grid(cfg.size, scenario.obstacles)
         start = tuple(int(v) for v in scenario.start)
         if len(start) != 3 or not all(0 <= v < s for v, s in zip(start, cfg.size, strict=True)):
             raise ConfigError(f"scenario start {scenario.start} lies outside the grid {cfg.size}")
@@ -344,7 +382,14 @@ class WorldBatch:
         w.obstacles[e] = 0.0
         w.obstacles[e, :n] = scenario.obstacles
         w.blocked[e] = blocked
-        w.coverable[e] = ~w.blocked[e, :, :, 0]
+        if grids is not None:
+            w.occluding[e] = grids.occluding
+            w.coverable[e] = grids.coverable
+            w.coverable_all[e] = grids.coverable_all
+        else:
+            w.occluding[e] = blocked
+            w.coverable[e] = ~w.blocked[e, :, :, 0]
+            w.coverable_all[e] = int(w.coverable[e].sum())
         w.status[e] = 0
         st = w.status[e : e + 1]  # a view: numpy writes a record's fields through it
         st["x"], st["y"], st["z"] = start
@@ -372,7 +417,7 @@ class WorldBatch:
         tilt, pan, zoom10 = camera if camera is not None else self.camera_setting(e)
         buf = np.empty_like(self.buf[e])
         at = CameraPose(int(x), int(y), int(z), int(tilt), int(pan), int(zoom10))
-        n = footprint_cells(self.lens, at, self.obstacle_list(e), buf)
+        n = footprint_cells(self.lens, at, self.obstacle_list(e), self.occluding[e], buf)
         return buf[:n].copy()
 
     def covered(self, e: int) -> np.ndarray:
@@ -413,6 +458,7 @@ __all__ = [
     "STATE_ARRAYS",
     "STATUS_DTYPE",
     "Params",
+    "MapGrids",
     "Scenario",
     "WorldArrays",
     "WorldBatch",
