@@ -34,7 +34,8 @@ def memory_limit(cfg: VCPPConfig) -> int:
 def world_bytes(cfg: VCPPConfig) -> int:
     """The arrays of one world (what :class:`~pirl.world.state.WorldBatch` allocates per world):
     per voxel ``blocked`` and ``occluding`` (1 byte each) and ``visits`` (4); per ground
-    cell ``coverable``, ``redmask`` (1 each), ``views`` (4) and the path-search scratch (8); the rest is small."""
+    cell ``coverable``, ``redmask`` (1 each), ``views`` (4) and the path-search scratch (8);
+    the rest is small."""
     sx, sy, sz = cfg.size
     return sx * sy * sz * 6 + sx * sy * 14 + 64 * 1024
 

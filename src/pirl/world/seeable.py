@@ -81,11 +81,11 @@ def _reach(blocked, starts):
         head += 1
         for m in range(6):
             i, j, k = x + moves[m, 0], y + moves[m, 1], z + moves[m, 2]
-            if 0 <= i < sx and 0 <= j < sy and 0 <= k < sz and not blocked[i, j, k]:
-                if not seen[i, j, k]:
-                    seen[i, j, k] = True
-                    queue[tail, 0], queue[tail, 1], queue[tail, 2] = i, j, k
-                    tail += 1
+            inside = 0 <= i < sx and 0 <= j < sy and 0 <= k < sz
+            if inside and not blocked[i, j, k] and not seen[i, j, k]:
+                seen[i, j, k] = True
+                queue[tail, 0], queue[tail, 1], queue[tail, 2] = i, j, k
+                tail += 1
     return seen
 
 
