@@ -162,6 +162,9 @@ def render(
     footprint: Annotated[str | None, typer.Option(help="paper or frustum.")] = None,
     config: ConfigOpt = None,
     fps: Annotated[int, typer.Option(help="Frames per second of the GIF.")] = 12,
+    site: Annotated[
+        Path | None, typer.Option(help="A site folder to fly instead of a generated world.")
+    ] = None,
 ) -> None:
     """Fly one episode with a simple policy and write it as an animated GIF."""
     from pirl.env import VCPPEnv
@@ -173,6 +176,10 @@ def render(
     check_seed(seed)
     check_gif_target(out, fps)
     cfg = _env_config(config, size=tuple(size), footprint=footprint)
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        cfg = with_site(cfg, str(site))
     px = cell_pixels(cfg.size, cfg.render_cell_px)
     check_memory(cfg, 1, per_step_bytes=cfg.size[0] * cfg.size[1] * px * px * 3)
     env = VCPPEnv(cfg, render_mode="rgb_array")
@@ -392,6 +399,10 @@ def evaluate(
         list[str] | None, typer.Option(help=f"Built-in methods: {', '.join(sorted(BUILTIN))}.")
     ] = None,
     sizes: Annotated[list[str] | None, typer.Option(help="30, 45, 60 or XxYxZ.")] = None,
+    site: Annotated[
+        list[Path] | None,
+        typer.Option(help="Site folders (docs/sites.md) evaluated beside the sizes, zero-shot."),
+    ] = None,
     episodes: Annotated[int, typer.Option(help="Scenarios per size.")] = 100,
     sim: Annotated[list[str] | None, typer.Option(help="Simulator(s): grid, physics.")] = None,
     out: Annotated[Path, typer.Option(help="Results folder.")] = Path("results/eval"),
@@ -423,10 +434,11 @@ def evaluate(
         with _StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
             summary = evaluate_runs(
                 out, _split_paths(runs or []), _split_words(methods or []),
-                _split_words(sizes or ["30", "45", "60"]), episodes, _split_words(sim or ["grid"]),
+                _split_words(sizes if sizes is not None else ([] if site else ["30", "45", "60"])),
+                episodes, _split_words(sim or ["grid"]),
                 workers, _preset(config, "--config") if config is not None else None, advisor,
                 act, overwrite, progress=_episode_progress(bar, "episodes"),
-                ray_address=ray_address,
+                ray_address=ray_address, sites=_split_paths(site or []),
             )  # fmt: skip
     except KeyboardInterrupt:
         raise _interrupted(
@@ -674,7 +686,9 @@ def _copies_format_example(rec: Any, prompt: str) -> bool:
     )
 
 
-MULTI_VALUE_OPTIONS = ("--runs", "--methods", "--sizes", "--sim", "--seeds", "--policy")
+MULTI_VALUE_OPTIONS = (
+    "--runs", "--methods", "--sizes", "--sim", "--seeds", "--policy", "--site",
+)  # fmt: skip
 
 
 def expand_multi_values(argv: list[str]) -> list[str]:
@@ -701,6 +715,73 @@ def main() -> None:
 
     _quiet.install()
     app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
+
+
+site_app = typer.Typer(no_args_is_help=True, help="Bring your own site (docs/sites.md).")
+app.add_typer(site_app, name="site")
+
+
+@site_app.command("check")
+@_clean_errors
+def site_check(
+    site: Annotated[Path, typer.Argument(help="The site folder (or its site.yaml).")],
+    picture: Annotated[
+        Path | None, typer.Option(help="Write a top-down PNG of the site and its reasons.")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    config: Annotated[
+        Path | None, typer.Option(help="A preset whose env section sets the camera model.")
+    ] = None,
+) -> None:
+    """Load and check a site: its size, coverable cells and every reason a cell cannot be seen.
+
+    Exits 0 when at least one coverable cell can be seen, 1 otherwise."""
+    import json
+
+    from pirl.config.run import RunConfig
+    from pirl.evaluate import site_check as sc
+
+    env = RunConfig.from_yaml(_preset(config, "--config")).env if config else None
+    found, seen, report = sc.check_site(site, env)
+    if picture is not None:
+        report["picture"] = str(sc.picture(found, seen, picture))
+    if as_json:
+        print(json.dumps(report, sort_keys=True))
+    else:
+        x, y, z = report["size"]
+        console.print(
+            f"site {report['site']}: {x} x {y} x {z} cells of {report['cell_size_m']:g} m "
+            f"(levels {report['level_height_m']:g} m), "
+            + ("georeferenced" if report["georeferenced"] else "not georeferenced")
+            + f"; camera {report['footprint']}"
+            + (", occlusion" if report["occlusion"] else "")
+        )
+        console.print(
+            f"coverable {report['coverable']:,}, seeable {report['seeable']:,}, blocked "
+            f"{report['blocked_share']:.1%} of cells, {report['starts']:,} start cell(s)"
+        )
+        for reason, count in report["unseeable"].items():
+            if count:
+                console.print(f"  {count:,} cannot be seen: {sc.REASON_TEXT[reason]}")
+        if picture is not None:
+            console.print(f"wrote {report['picture']}")
+    if not report["usable"]:
+        if not as_json:
+            err.print("[bold red]error:[/] no coverable cell can be seen: the site is unusable")
+        raise typer.Exit(1)
+
+
+@site_app.command("import-uavsim")
+@_clean_errors
+def site_import_uavsim(
+    map_png: Annotated[Path, typer.Argument(help="A uavSim map PNG (res/*.png).")],
+    out: Annotated[Path, typer.Option(help="The site folder to write (must not exist).")],
+) -> None:
+    """Turn a uavSim map (red no-fly, green obstacle, blue start) into a site folder."""
+    from pirl.world.uavsim import import_uavsim
+
+    folder = import_uavsim(map_png, out)
+    console.print(f"wrote {folder}; check it with: pirl site check {folder}")
 
 
 @app.command("webots-world")

@@ -31,7 +31,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds, size_name
-from pirl.evaluate.summary import write_summary
+from pirl.evaluate.summary import SITE_PREFIX, write_summary
 
 SIMS = ("grid", "physics")
 FIXED = "fixed"  # the act of built-in methods: they act by their own rule in both modes
@@ -129,6 +129,8 @@ class EvalPlan:
     config: RunConfig = field(default_factory=RunConfig)
     episodes_per_method: dict[str, int] = field(default_factory=dict)
     sim_sizes: dict[str, list[tuple[int, int, int]]] = field(default_factory=dict)
+    sites: list[str] = field(default_factory=list)
+    """Site folders evaluated beside the sizes (grid simulator only)."""
     sim_episodes: dict[str, int] = field(default_factory=dict)
     acts: list[str] = field(default_factory=lambda: ["greedy"])
     sim_acts: dict[str, list[str]] = field(default_factory=dict)
@@ -182,13 +184,14 @@ def run_chunk(
     spec: MethodSpec,
     env_dict: dict[str, Any],
     config_dict: dict[str, Any],
-    size: tuple[int, int, int],
+    size: tuple[int, int, int] | str,
     sim: str,
     seeds: list[int],
     act: str = FIXED,
     batched: bool = True,
 ) -> list[dict[str, Any]]:
-    """Play ``spec`` on each seed of ``size`` acting ``act``; one record per episode."""
+    """Play ``spec`` on each seed of ``size`` (or of the site folder ``size`` names) acting
+    ``act``; one record per episode."""
     import torch
 
     from pirl import _quiet
@@ -201,7 +204,18 @@ def run_chunk(
     torch.set_num_threads(1)
     config = RunConfig.from_dict(config_dict)
     # Evaluation scenarios start at the env's camera pose, whatever a run trained from.
-    env_cfg = VCPPConfig.from_dict(env_dict).replace(size=tuple(size), start_camera="fixed")
+    env_cfg = VCPPConfig.from_dict(env_dict).replace(start_camera="fixed")
+    where: dict[str, Any]
+    if isinstance(size, str):
+        from pirl.world.seeable import with_site
+        from pirl.world.site import load_site
+
+        env_cfg = with_site(env_cfg, size)
+        name = load_site(size).name
+        where = {"size": SITE_PREFIX + name, "site": name, "grid": size_name(env_cfg.size)}
+    else:
+        env_cfg = env_cfg.replace(size=tuple(size))
+        where = {"size": size_name(size)}
     policy = _policy(spec, config)
     if act != FIXED:
         policy.set_act(act)
@@ -226,7 +240,7 @@ def run_chunk(
                 "label": spec.label,
                 "sim": sim,
                 "act": act,
-                "size": size_name(size),
+                **where,
                 "seed": seed,
                 "train_seed": spec.train_seed,
                 "source": spec.source,
@@ -246,16 +260,27 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
             episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
             # A batched chunk is best large: one chunk per worker; else two per worker.
             batched = plan.batched and sim == "grid" and act != FIXED
-            for size in plan.sim_sizes.get(sim, plan.sizes):
-                seeds = scenario_seeds(size, episodes)
+            worlds: list[Any] = list(plan.sim_sizes.get(sim, plan.sizes))
+            worlds += plan.sites if sim == "grid" else []
+            for size in worlds:
+                seeds = scenario_seeds(_grid_size(size), episodes)
                 parts = max(1, workers if batched else 2 * workers)
                 chunk = max(1, math.ceil(len(seeds) / parts))
                 for i in range(0, len(seeds), chunk):
                     tasks.append((spec, size, sim, seeds[i : i + chunk], act))
     # Longest first, so no long episode starts last while the other workers idle: the
     # physics simulator's (seconds each), then the grid's largest worlds.
-    tasks.sort(key=lambda t: (t[2] != "physics", -t[1][0] * t[1][1]))
+    tasks.sort(key=lambda t: (t[2] != "physics", -_grid_size(t[1])[0] * _grid_size(t[1])[1]))
     return tasks
+
+
+def _grid_size(world: tuple[int, int, int] | str) -> tuple[int, int, int]:
+    """The grid size of a size or of a site folder."""
+    if isinstance(world, str):
+        from pirl.world.site import load_site
+
+        return load_site(world).size
+    return world
 
 
 def _act_sims(plan: EvalPlan, spec: MethodSpec) -> list[tuple[str, str]]:
@@ -478,9 +503,11 @@ def evaluate_runs(
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
     ray_address: str | None = None,
+    sites: list[Path] | None = None,
 ) -> Path:
     """``pirl evaluate``: finished ``runs`` and ``builtins`` on the same scenarios of each of
-    ``sizes``; returns the summary written into ``out``.
+    ``sizes`` and of each site folder of ``sites`` (zero-shot: a site's start cells, its
+    map); returns the summary written into ``out``.
 
     The scenarios follow the env section of preset ``config``, else of the first run's
     config.yaml, else the defaults. Everything that can be refused is refused before ``out``
@@ -492,6 +519,8 @@ def evaluate_runs(
     from pirl.agents.run_folder import folder_contents, folder_lock
     from pirl.agents.runs import check_layouts
     from pirl.evaluate.scenarios import parse_size
+    from pirl.world.seeable import with_site
+    from pirl.world.site import site_folder
 
     acts = parse_acts(act)
     if episodes < 1:
@@ -519,6 +548,13 @@ def evaluate_runs(
     specs += [spec_for_builtin(m, advisor) for m in builtins]
     size_list = [parse_size(s) for s in sizes]
     check_layouts(cfg.env, size_list, episodes)  # batched: a chunk of worlds per worker
+    site_list = [str(site_folder(s).resolve()) for s in sites or []]
+    if site_list and "physics" in (sims or []):
+        raise ConfigError(
+            "--site with --sim physics: sites fly in the grid simulator only in this version"
+        )
+    for site in site_list:  # refused here, in one line, before out is touched
+        with_site(cfg.env, site)
     plan = EvalPlan(
         specs=specs,
         sizes=size_list,
@@ -527,6 +563,7 @@ def evaluate_runs(
         env=cfg.env,
         config=cfg,
         acts=acts,
+        sites=site_list,
     )
     with folder_lock(out):
         return evaluate(plan, out, workers, progress=progress, ray_address=ray_address)

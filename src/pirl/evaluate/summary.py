@@ -41,6 +41,8 @@ COLUMNS = (
     + [f"{m}_mean" for m in OTHER]
     + ["label"]
 )
+SITE_PREFIX = "site:"
+"""The ``size`` of a site's episode rows: ``site:<name>`` (its grid size is ``grid``)."""
 TEXT_COLUMNS = ("method", "sim", "size", "act", "label")
 
 
@@ -190,8 +192,10 @@ def unshaped_warnings(rows: list[dict[str, Any]]) -> list[str]:
 
 def _order(key: tuple[str, ...]) -> tuple:
     method, sim, size, act = key
-    dims = tuple(int(v) for v in size.split("x"))
-    return (sim, act, method, dims)
+    # Generated sizes by their dimensions, then sites by name.
+    if size.startswith(SITE_PREFIX):
+        return (sim, act, method, (1, size))
+    return (sim, act, method, (0, tuple(int(v) for v in size.split("x"))))
 
 
 def write_summary(records: list[dict[str, Any]], path: Path) -> list[dict[str, Any]]:

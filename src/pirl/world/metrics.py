@@ -1,6 +1,7 @@
 """Episode metrics (docs/design.md: metrics) read off a world's bookkeeping.
 
-- VCR = covered / coverable.
+- VCR = covered / coverable (on a site: over its seeable cells; ``vcr_all`` over all of its
+  coverable cells).
 - BE = VCR / (2 - b_end / b_start), battery normalized so b_start = 1.
 - RVC = |C_redundant| / |C_covered|: covered cells that lay in the view of a redundant step (a
   step whose view added no new cell), over covered cells. This is our reading of the paper.
@@ -21,8 +22,11 @@ def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
     steps = r["steps"]
     battery_left = batch.battery(e)
     vcr = covered / coverable if coverable else 0.0
+    everything = int(batch.coverable_all[e])
     return {
         "vcr": vcr,
+        # On a site: the share of all its coverable cells, seeable or not (= vcr elsewhere).
+        "vcr_all": covered / everything if everything else 0.0,
         "be": vcr / (2.0 - battery_left),
         "rvc": r["redundant_cells"] / covered if covered else 0.0,
         "overlap": r["multi_cells"] / covered if covered else 0.0,

@@ -99,30 +99,39 @@ def _union_views(lens, sources, occluding, target, poses, reach, out):
     for i in range(sx):
         for j in range(sy):
             left[i, j] = 1 if target[i, j] and not out[i, j] else 0
-    for x in range(sx):
-        for y in range(sy):
-            for z in range(sz):
-                if not sources[x, y, z]:
-                    continue
-                # Skip a camera cell with nothing unseen within its reach.
-                any_left = False
-                for i in range(max(0, x - reach), min(sx, x + reach + 1)):
-                    for j in range(max(0, y - reach), min(sy, y + reach + 1)):
-                        if left[i, j]:
-                            any_left = True
-                            break
-                    if any_left:
-                        break
-                if not any_left:
-                    continue
-                for p in range(poses.shape[0]):
-                    pose = CameraPose(x, y, z, poses[p, 0], poses[p, 1], poses[p, 2])
-                    n = footprint_cells(lens, pose, empty, occluding, buf)
-                    for r in range(n):
-                        i, j = buf[r, 0], buf[r, 1]
-                        if left[i, j]:
-                            left[i, j] = 0
-                            out[i, j] = True
+    tried = np.zeros(sources.shape, dtype=np.bool_)
+    # A sparse pass first: it sees most cells, so the full pass skips most camera cells.
+    for stride in (5, 1):
+        for x in range(0, sx, stride):
+            for y in range(0, sy, stride):
+                for z in range(sz):
+                    if sources[x, y, z] and not tried[x, y, z]:
+                        tried[x, y, z] = True
+                        _views_from(lens, x, y, z, occluding, poses, reach, left, out, buf, empty)
+
+
+@numba.njit(cache=True)
+def _views_from(lens, x, y, z, occluding, poses, reach, left, out, buf, empty):
+    sx, sy = left.shape
+    # Skip a camera cell with nothing unseen within its reach.
+    any_left = False
+    for i in range(max(0, x - reach), min(sx, x + reach + 1)):
+        for j in range(max(0, y - reach), min(sy, y + reach + 1)):
+            if left[i, j]:
+                any_left = True
+                break
+        if any_left:
+            break
+    if not any_left:
+        return
+    for p in range(poses.shape[0]):
+        pose = CameraPose(x, y, z, poses[p, 0], poses[p, 1], poses[p, 2])
+        n = footprint_cells(lens, pose, empty, occluding, buf)
+        for r in range(n):
+            i, j = buf[r, 0], buf[r, 1]
+            if left[i, j]:
+                left[i, j] = 0
+                out[i, j] = True
 
 
 def _poses(model: int) -> np.ndarray:

@@ -1,0 +1,99 @@
+"""Write the example sites of this folder (run from the repository root:
+``python examples/sites/make_examples.py``). The sites are invented, not surveys of real
+places; `campus` is placed on the Earth so that its files carry real coordinates.
+
+- ``campus``: a 48 x 40 GeoTIFF DSM (5 m cells, UTM zone 32N near Munich) with a ring building
+  round a closed courtyard, a GeoJSON area (longitude/latitude) and a no-fly zone.
+- ``village``: a 128 x 128 grey PNG of heights (0.25 m per grey level, 4 m cells) with an
+  origin, streets of houses and a start zone.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def campus() -> None:
+    import rasterio
+    from pyproj import Transformer
+    from rasterio.transform import from_origin
+
+    out = HERE / "campus"
+    out.mkdir(exist_ok=True)
+    cols, rows, cell = 48, 40, 5.0
+    h = np.zeros((rows, cols), dtype=np.float32)  # row 0 = north
+    h[4:8, 4:16] = 9.0  # a low hall: flown over at level 2
+    h[24:36, 28:44] = 24.0  # a ring building, taller than every level ...
+    h[27:33, 31:41] = 0.0  # ... round a courtyard the UAV cannot enter
+    h[14:18, 30:34] = 14.0
+    h[30:34, 6:10] = 4.0  # a shed
+    west, north = 690_000.0, 5_336_000.0
+    transform = from_origin(west, north, cell, cell)
+    with rasterio.open(
+        out / "dsm.tif", "w", driver="GTiff", width=cols, height=rows, count=1,
+        dtype="float32", crs="EPSG:32632", transform=transform,
+    ) as dst:  # fmt: skip
+        dst.write(h, 1)
+    to_ll = Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True)
+
+    def polygon(e0: float, n0: float, e1: float, n1: float) -> dict:
+        ring = [(e0, n0), (e1, n0), (e1, n1), (e0, n1), (e0, n0)]
+        coords = [list(to_ll.transform(e, n)) for e, n in ring]
+        return {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [coords]}}
+
+    south = north - rows * cell
+    area = polygon(west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
+    no_fly = polygon(west + 36 * cell, south + 30 * cell, west + 47 * cell, south + 39 * cell)
+    for name, feat in (("area", area), ("no_fly", no_fly)):
+        (out / f"{name}.geojson").write_text(
+            json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
+        )
+    (out / "site.yaml").write_text(
+        "# An invented campus on a GeoTIFF DSM (UTM 32N): docs/sites.md\n"
+        "name: campus\n"
+        "heights: dsm.tif          # metres above ground, 5 m pixels\n"
+        "level_height_m: 5.0       # levels fly at 5, 10 and 15 m\n"
+        "levels: 3\n"
+        "area: area.geojson        # longitude/latitude\n"
+        "no_fly: no_fly.geojson    # a helipad corner\n"
+        "start: [3, 3]\n"
+    )
+
+
+def village() -> None:
+    from PIL import Image
+
+    out = HERE / "village"
+    out.mkdir(exist_ok=True)
+    n = 128
+    rng = np.random.default_rng(5)
+    grey = np.zeros((n, n), dtype=np.uint8)  # row 0 = north
+    for by in range(6, n - 10, 16):
+        for bx in range(6, n - 10, 14):
+            if rng.random() < 0.2:
+                continue  # a yard
+            w, d = int(rng.integers(5, 10)), int(rng.integers(5, 11))
+            grey[by : by + d, bx : bx + w] = int(rng.integers(12, 48))  # 3-12 m
+    grey[60:68, 60:68] = 200  # a church tower, 50 m
+    Image.fromarray(grey, mode="L").save(out / "heights.png")
+    (out / "site.yaml").write_text(
+        "# An invented village on a grey PNG of heights: docs/sites.md\n"
+        "name: village\n"
+        "heights: heights.png\n"
+        "height_scale_m: 0.25      # metres per grey level\n"
+        "cell_size_m: 4.0\n"
+        "level_height_m: 4.0\n"
+        "levels: 3\n"
+        "origin: [47.3769, 8.5417] # lat, lon of the south-west corner\n"
+        "start: {zone: [0, 0, 5, 5]}\n"
+    )
+
+
+if __name__ == "__main__":
+    campus()
+    village()
