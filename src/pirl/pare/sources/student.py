@@ -167,10 +167,13 @@ class StudentSource:
         # Refit at every boundary with new answers until the gate passes; after that only
         # once the data has grown by refit_growth since the last fit: as the student
         # converges, refits (the largest cost PIRL adds to PPO) become rarer.
-        # Until the gate passes each refit starts from fresh weights (see Student.fit).
+        # Until the gate passes, a refit tries warm and fresh weights (Student.fit_closed).
         closed = not student.passes(*self.gate)
-        if new > 0 and (closed or new >= self.refit_growth * student.fitted_rows):
-            student.fit(self.fit_steps, fresh=closed)
+        if new > 0 and closed:
+            student.fit_closed(self.fit_steps, self.gate[1])
+            st.student_refits += 1
+        elif new > 0 and new >= self.refit_growth * student.fitted_rows:
+            student.fit(self.fit_steps)
             st.student_refits += 1
         elif new > 0:
             st.student_refits_deferred += 1
