@@ -169,7 +169,7 @@ def _occluded_voxels(cx, cy, cz, gx, gy, occluding):
     (other than those of the target cell's own column: a roof is seen, not hidden by itself).
 
     A 3-D DDA (Amanatides and Woo) over voxels centred at integer coordinates; the ground
-    plane is at z = -1, below level 0.
+    plane is at z = -1, and level 0's voxels reach down to it.
     """
     sx, sy, sz = occluding.shape
     if sx == 0:
@@ -194,11 +194,12 @@ def _occluded_voxels(cx, cy, cz, gx, gy, occluding):
             t, j, ty = ty, j + sj, ty + tdy
         else:
             t, k, tz = tz, k - 1, tz + tdz
-        if t >= 1.0 or k < 0:
+        if t >= 1.0:
             return False
         if i < 0 or j < 0 or i >= sx or j >= sy or k >= sz:
             continue
-        if (i != ti or j != tj) and occluding[i, j, k]:
+        # Below level 0 (z in [-1, -0.5]) a building still stands on the ground.
+        if (i != ti or j != tj) and occluding[i, j, max(k, 0)]:
             return True
 
 

@@ -59,7 +59,8 @@ class GeoRef:
         from pyproj import Transformer
 
         to = Transformer.from_crs("EPSG:4326", self.crs, always_xy=True)
-        e, n = to.transform(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
+        # Lists, not arrays: pyproj reads a one-element array as a scalar point (and warns).
+        e, n = to.transform(np.asarray(lon, float).tolist(), np.asarray(lat, float).tolist())
         return (np.asarray(e) - self.west) / self.cell_size_m, (
             np.asarray(n) - self.south
         ) / self.cell_size_m
@@ -71,7 +72,7 @@ class GeoRef:
         to = Transformer.from_crs(self.crs, "EPSG:4326", always_xy=True)
         e = self.west + np.asarray(x, dtype=float) * self.cell_size_m
         n = self.south + np.asarray(y, dtype=float) * self.cell_size_m
-        lon, lat = to.transform(e, n)
+        lon, lat = to.transform(np.atleast_1d(e).tolist(), np.atleast_1d(n).tolist())
         return np.asarray(lon), np.asarray(lat)
 
 
@@ -246,11 +247,26 @@ def _check_pixels(rows: int, cols: int, s: SiteSettings) -> None:
 
 
 def _read_geotiff(path: Path, s: SiteSettings) -> _Raster:
-    import rasterio
+    import warnings
 
-    with rasterio.open(path) as src:
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)  # said below, in one line
+        src = rasterio.open(path)
+    with src:
         _check_pixels(src.height, src.width, s)
         t = src.transform
+        if src.crs is None and t.is_identity:  # a plain raster in a .tif: no geo-reference
+            if not s.origin:
+                raise ConfigError(
+                    f"site.heights: {path.name} has no CRS; give site.origin [lat, lon] of its "
+                    "south-west corner"
+                )
+            band = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            pixel = s.pixel_size_m or s.cell_size_m or DEFAULT_CELL_M
+            return _Raster(band, pixel, _local_crs(s.origin), 0.0, 0.0)
         if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.e >= 0:
             raise ConfigError(
                 f"site.heights: {path.name} is rotated or not north-up; warp it to a north-up "
