@@ -105,33 +105,30 @@ def _union_views(lens, sources, occluding, target, poses, reach, out):
         for x in range(0, sx, stride):
             for y in range(0, sy, stride):
                 for z in range(sz):
-                    if sources[x, y, z] and not tried[x, y, z]:
-                        tried[x, y, z] = True
-                        _views_from(lens, x, y, z, occluding, poses, reach, left, out, buf, empty)
+                    if not sources[x, y, z] or tried[x, y, z]:
+                        continue
+                    tried[x, y, z] = True
+                    if not _any_left(left, x, y, reach):
+                        continue
+                    for p in range(poses.shape[0]):
+                        pose = CameraPose(x, y, z, poses[p, 0], poses[p, 1], poses[p, 2])
+                        n = footprint_cells(lens, pose, empty, occluding, buf)
+                        for r in range(n):
+                            i, j = buf[r, 0], buf[r, 1]
+                            if left[i, j]:
+                                left[i, j] = 0
+                                out[i, j] = True
 
 
 @numba.njit(cache=True)
-def _views_from(lens, x, y, z, occluding, poses, reach, left, out, buf, empty):
+def _any_left(left, x, y, reach):
+    """Whether an unseen cell lies within ``reach`` of (x, y)."""
     sx, sy = left.shape
-    # Skip a camera cell with nothing unseen within its reach.
-    any_left = False
     for i in range(max(0, x - reach), min(sx, x + reach + 1)):
         for j in range(max(0, y - reach), min(sy, y + reach + 1)):
             if left[i, j]:
-                any_left = True
-                break
-        if any_left:
-            break
-    if not any_left:
-        return
-    for p in range(poses.shape[0]):
-        pose = CameraPose(x, y, z, poses[p, 0], poses[p, 1], poses[p, 2])
-        n = footprint_cells(lens, pose, empty, occluding, buf)
-        for r in range(n):
-            i, j = buf[r, 0], buf[r, 1]
-            if left[i, j]:
-                left[i, j] = 0
-                out[i, j] = True
+                return True
+    return False
 
 
 def _poses(model: int) -> np.ndarray:
