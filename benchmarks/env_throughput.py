@@ -17,6 +17,9 @@ even where the absolute numbers are noisy (a shared machine):
 exported to a temporary folder and measured in a child process, interleaved with this code's
 rows, best of two each): the same run measures a change against the code before it.
 
+``--site PATH`` measures the batched rows on a site (docs/sites.md) against ``--size`` in the
+same run (interleaved, best of two) and states the memory of one world of each.
+
 ``--baseline-settings JSON`` measures the same batched rows with other env settings, as a
 ratio (e.g. an observation option on against off).
 
@@ -97,6 +100,10 @@ def naive_rate(settings: dict, seconds: float) -> float:
 def core_rates(settings: dict, envs: int, seconds: float) -> dict[str, float]:
     """Agent-steps/s of the SB3 adapter and of the batched core (the rows --against compares)."""
     cfg = VCPPConfig(**{**settings, "size": tuple(settings["size"])})
+    if cfg.site:
+        from pirl.world.seeable import with_site
+
+        cfg = with_site(cfg, cfg.site)
     sb3 = make_vec_env(envs, 0, cfg)
     sb3.reset()
     core = EnvCore(cfg, envs)
@@ -146,6 +153,29 @@ def compare(rev: str, settings: dict, envs: int, seconds: float) -> None:
         print(f"{key:<28} {new[key]:>12,.0f} {old[key]:>12,.0f} {new[key] / old[key]:>8.2f}x")
 
 
+def compare_site(site: str, settings: dict, envs: int, seconds: float) -> None:
+    """The batched rows on ``site`` against ``settings``' size, interleaved, best of two."""
+    from pirl.world.memory import world_bytes
+    from pirl.world.seeable import with_site
+
+    on_site = {**settings, "site": site}
+    site_cfg = with_site(VCPPConfig(**{**settings, "size": tuple(settings["size"])}), site)
+    ours, theirs = {}, {}
+    for _ in range(2):
+        for into, what in ((ours, on_site), (theirs, settings)):
+            for key, value in core_rates(what, envs, seconds).items():
+                into[key] = max(into.get(key, 0.0), value)
+    size = "x".join(str(v) for v in settings["size"])
+    grid = "x".join(str(v) for v in site_cfg.size)
+    base_cfg = VCPPConfig(**{**settings, "size": tuple(settings["size"])})
+    print(f"\nsite {site} ({grid}) against {size} ({envs} worlds): world-steps/s")
+    for key in ours:
+        print(f"{key:<28} {ours[key]:>12,.0f} vs {theirs[key]:>12,.0f}  "
+              f"{ours[key] / theirs[key]:.2f}x")  # fmt: skip
+    print(f"memory per world: {world_bytes(site_cfg) / 2**20:.1f} MiB on the site, "
+          f"{world_bytes(base_cfg) / 2**20:.2f} MiB at {size}")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="timing per row")
@@ -155,6 +185,7 @@ def main() -> None:
     parser.add_argument("--threads", action="store_true", help="also numba threads (parallel)")
     parser.add_argument("--against", metavar="REV", help="also measure git revision REV")
     parser.add_argument("--settings", default="{}", help="JSON of extra env settings")
+    parser.add_argument("--site", help="also measure on this site folder, against --size")
     parser.add_argument("--baseline-settings", metavar="JSON",
                         help="also measure the batched rows with these extra env settings "
                              "instead, and print --settings' rate as a ratio of them")  # fmt: skip
@@ -193,6 +224,8 @@ def main() -> None:
         print(f"{name:<28} {value:>12,.0f} {value / naive:>8.1f} {value / single:>9.1f}")
     if args.against:
         compare(args.against, settings, n, args.seconds)
+    if args.site:
+        compare_site(args.site, settings, n, args.seconds)
     if args.baseline_settings:
         base = {"size": list(size), "footprint": args.footprint}
         base.update(json.loads(args.baseline_settings))

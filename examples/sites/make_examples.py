@@ -6,6 +6,7 @@ places; `campus` is placed on the Earth so that its files carry real coordinates
   round a closed courtyard, a GeoJSON area (longitude/latitude) and a no-fly zone.
 - ``village``: a 128 x 128 grey PNG of heights (0.25 m per grey level, 4 m cells) with an
   origin, streets of houses and a start zone.
+- ``town``: 256 x 256 cells and 8 levels, not georeferenced: the scale benchmark's site.
 """
 
 from __future__ import annotations
@@ -94,6 +95,34 @@ def village() -> None:
     )
 
 
+def town() -> None:
+    from PIL import Image
+
+    out = HERE / "town"
+    out.mkdir(exist_ok=True)
+    n = 256
+    rng = np.random.default_rng(11)
+    grey = np.zeros((n, n), dtype=np.uint8)  # row 0 = north; 0.2 m per grey level
+    for by in range(4, n - 12, 20):
+        for bx in range(4, n - 12, 18):
+            if rng.random() < 0.15:
+                continue  # a square
+            w, d = int(rng.integers(6, 14)), int(rng.integers(6, 16))
+            grey[by : by + d, bx : bx + w] = int(rng.integers(25, 220))  # 5-44 m
+    Image.fromarray(grey, mode="L").save(out / "heights.png")
+    (out / "site.yaml").write_text(
+        "# An invented town of 256 x 256 cells and 8 levels (the scale benchmark): docs/sites.md\n"
+        "name: town\n"
+        "heights: heights.png\n"
+        "height_scale_m: 0.2       # metres per grey level\n"
+        "cell_size_m: 5.0\n"
+        "level_height_m: 5.0       # levels fly at 5, 10, ... 40 m\n"
+        "levels: 8\n"
+        "start: {zone: [0, 0, 3, 3]}\n"
+    )
+
+
 if __name__ == "__main__":
     campus()
     village()
+    town()
