@@ -99,11 +99,13 @@ def naive_rate(settings: dict, seconds: float) -> float:
 
 def core_rates(settings: dict, envs: int, seconds: float) -> dict[str, float]:
     """Agent-steps/s of the SB3 adapter and of the batched core (the rows --against compares)."""
-    cfg = VCPPConfig(**{**settings, "size": tuple(settings["size"])})
-    if cfg.site:
+    if settings.get("site"):  # only this code has sites: an older revision never gets one
         from pirl.world.seeable import with_site
 
-        cfg = with_site(cfg, cfg.site)
+        plain = {k: v for k, v in settings.items() if k != "site"}
+        cfg = with_site(VCPPConfig(**{**plain, "size": tuple(plain["size"])}), settings["site"])
+    else:
+        cfg = VCPPConfig(**{**settings, "size": tuple(settings["size"])})
     sb3 = make_vec_env(envs, 0, cfg)
     sb3.reset()
     core = EnvCore(cfg, envs)

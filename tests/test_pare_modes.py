@@ -388,3 +388,30 @@ def test_distill_then_train_from_the_student(tmp_path):
     # A student with enough held-out answers shapes from the first step.
     assert stats["steps_unshaped"] == 0 and stats["steps_student"] == stats["steps"]
     assert json.loads((out / "meta.json").read_text())["student_from"] == str(student)
+
+
+def test_run_scope_keeps_each_runs_answers_its_own(tmp_path):
+    import shutil
+
+    from pirl.advice.student import TeacherDataset
+
+    data = tmp_path / "d.sqlite"
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(
+        pare={"advisor": "oracle", "mode": "student", "oracle_teacher_rate": 0.25,
+              "student_dataset": str(data), "student_dataset_scope": "run",
+              "student_wait_teacher": True},
+        train={"total_steps": 256},
+    )  # fmt: skip
+
+    def per_key() -> list[int]:
+        conn = TeacherDataset(data)._connection()
+        rows = conn.execute("SELECT teacher, COUNT(*) FROM samples GROUP BY teacher").fetchall()
+        return sorted(n for _, n in rows)
+
+    train("pirl", cfg, tmp_path / "a", seed=0, show_progress=False)
+    train("pirl", cfg, tmp_path / "b", seed=0, show_progress=False)
+    first = per_key()
+    assert len(first) == 2 and first[0] == first[1] > 0  # b never saw a's answers
+    shutil.rmtree(tmp_path / "a")  # a fresh run in a's folder drops a's stale answers
+    train("pirl", cfg, tmp_path / "a", seed=0, show_progress=False)
+    assert per_key() == first

@@ -235,6 +235,11 @@ class TeacherDataset:
         )
         return int(cur.rowcount)
 
+    def drop(self, teacher: str) -> int:
+        """Delete every row of ``teacher``; returns how many."""
+        cur = self._connection().execute("DELETE FROM samples WHERE teacher = ?", (teacher,))
+        return int(cur.rowcount)
+
     def count(self, teacher: str) -> int:
         """Rows stored for ``teacher``."""
         row = (

@@ -7,6 +7,7 @@ student of another teacher stops with one line and leaves nothing behind.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +34,13 @@ class PirlAdvice:
     """Student mode: most prompts per teacher request (the backend's own batch size)."""
     label: str
     """e.g. ``PIRL (student of local:SmolLM2-135M-Instruct; lam_cam 1, lam_move 1)``."""
+
+    def drop_own_answers(self) -> int:
+        """Delete the stored answers under this run's own dataset key (a fresh start of a run
+        whose answers are its own); returns how many."""
+        if self.student is None or self.dataset is None:
+            return 0
+        return self.dataset.drop(self.student.teacher)
 
 
 def _num(value: float) -> str:
@@ -66,8 +74,12 @@ def build_pirl_advice(
     probe: bool = True,
     seed: int = 0,
     log: Callable[[str], Any] = print,
+    run: str = "",
 ) -> PirlAdvice:
     """Build (and probe) the teacher, and in student mode the student and its dataset.
+
+    ``run``: the run folder, which keys the run's own answers under
+    ``pare.student_dataset_scope: run``.
 
     ``student_path``: a student written by ``pirl distill`` to start from; its teacher must be
     the configured one. A probe answer that does not parse is a warning (``log``), not an
@@ -95,7 +107,7 @@ def build_pirl_advice(
     batch = kind.batch_size(cfg) if kind else 4 * cfg.advisor.openai_concurrency
     if cfg.pare.mode != "student":
         return PirlAdvice(advisor, None, None, rate, batch, label)
-    student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed)
+    student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed, run)
     return PirlAdvice(advisor, student, dataset, rate, batch, label)
 
 
@@ -166,7 +178,12 @@ def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> s
 
 
 def make_student(
-    cfg: RunConfig, advisor: Any, env_cfg: Any, student_path: Path | None, seed: int = 0
+    cfg: RunConfig,
+    advisor: Any,
+    env_cfg: Any,
+    student_path: Path | None,
+    seed: int = 0,
+    run: str = "",
 ) -> tuple[Any, Any]:
     """A new student of ``advisor`` (or the one saved at ``student_path``) and its dataset."""
     from pirl.advice.student import (
@@ -180,8 +197,10 @@ def make_student(
 
     dataset = TeacherDataset(dataset_path(cfg))
     key = teacher_key(advisor, cfg.pare.prompt_variant, env_cfg)
-    if cfg.pare.student_dataset_scope == "seed":
-        key += f":seed{seed}"
+    if cfg.pare.student_dataset_scope == "run":
+        if not run:
+            raise UserError("pare.student_dataset_scope: run needs a run folder (pirl train)")
+        key += ":run:" + hashlib.sha256(run.encode()).hexdigest()[:12]
     if student_path is not None:
         path = Path(student_path)
         file = path / STUDENT_FILE if path.is_dir() else path

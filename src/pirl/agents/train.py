@@ -395,10 +395,14 @@ def train(
         from pirl.agents.pirl_advice import build_pirl_advice
 
         # Before the folder exists: a dead server or a wrong student leaves nothing behind.
-        advice = build_pirl_advice(cfg, advisor, student, probe=True, seed=seed, log=_warn)
+        advice = build_pirl_advice(
+            cfg, advisor, student, probe=True, seed=seed, log=_warn, run=str(out.resolve())
+        )
         advisor = advice.advisor
     found = prepare_run_folder(out, resume, log)
     ckpt = found[0] if found is not None else None
+    if ckpt is None and advice is not None and cfg.pare.student_dataset_scope == "run":
+        advice.drop_own_answers()  # an earlier run of this folder must not teach this one
     torch.set_num_threads(cfg.ppo.torch_threads)
     meta = {
         "method": method,

@@ -156,8 +156,10 @@ class PareSettings(Settings, section="pare"):
     """Teacher answers with their states; empty = student.sqlite beside the answer cache."""
     student_dataset_scope: str = "shared"
     """Student mode: 'shared': every run of the same teacher and settings learns from every
-    answer stored so far (a later seed starts with an earlier seed's answers); 'seed': each
-    training seed keeps its own answers, so seeds replicate independently (studies)."""
+    answer stored so far (a later seed starts with an earlier seed's answers, a rerun with the
+    last one's); 'run': each run learns only from the answers it asked for itself (a fresh
+    start drops what an earlier run of its folder stored), so seeds replicate independently
+    (studies)."""
     student_wait_teacher: bool = False
     """Student mode: wait for the teacher's batch at each rollout boundary (reproducible runs;
     PPO then waits for a slow teacher)."""
@@ -186,7 +188,7 @@ class PareSettings(Settings, section="pare"):
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
             self.require_choice("prompt_variant", ("paper", "compact"))
         self.require_choice("student_gate_on", ("kappa", "agreement"))
-        self.require_choice("student_dataset_scope", ("shared", "seed"))
+        self.require_choice("student_dataset_scope", ("shared", "run"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
             "min_shaped", "student_kappa_gate",
