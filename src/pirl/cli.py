@@ -313,6 +313,9 @@ def train(
         Path | None,
         typer.Option(help="pirl, student mode: start from a student made by pirl distill."),
     ] = None,
+    site: Annotated[
+        Path | None, typer.Option(help="Train on a site folder (docs/sites.md): its seeded starts.")
+    ] = None,
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
     from pirl.agents.runs import train_run
@@ -322,7 +325,7 @@ def train(
         result = train_run(
             method, out, _preset(config, "--config") if config else None, _preset("quick"),
             steps=steps, seed=seed, advisor=advisor, expert=expert, resume=resume,
-            student=student,
+            student=student, site=site,
         )  # fmt: skip
     except TrainingInterrupted as stop:
         err.print(

@@ -109,8 +109,11 @@ def train_run(
     expert: Path | None = None,
     resume: bool = False,
     student: Path | None = None,
+    site: Path | None = None,
 ) -> Path:
     """``pirl train``: train (or resume) ``method`` into run folder ``out``; returns the model.
+
+    ``site``: train on that site folder's map and seeded starts instead of generated worlds.
 
     The config is the preset file ``config``; without one, a resumed run's own config.yaml,
     else ``default_config``. ``seed`` defaults to 0, or to the resumed run's. ``steps`` and
@@ -137,6 +140,17 @@ def train_run(
         cfg = cfg.with_overrides(train={"total_steps": steps})
     if advisor is not None:
         cfg = cfg.with_overrides(pare={"advisor": advisor})
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        on_site = with_site(cfg.env, str(site))
+        cfg = cfg.with_overrides(
+            env={
+                "site": on_site.site,
+                "size": list(on_site.size),
+                "ground_cells": on_site.ground_cells,
+            }
+        )
     if entry.advised:
         advisor_kind(cfg.pare.advisor).check_key(cfg)
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)

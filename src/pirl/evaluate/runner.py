@@ -536,7 +536,11 @@ def evaluate_runs(
     elif runs and (runs[0] / "config.yaml").is_file():
         cfg = RunConfig.from_yaml(runs[0] / "config.yaml")
         # A run records the reward it trained with; the scenarios do not depend on it.
-        cfg = replace(cfg, env=cfg.env.replace(reward="static", llm_weight=False))
+        # A run trained on a site is judged on the sizes and sites asked for, not its own.
+        cfg = replace(
+            cfg,
+            env=cfg.env.replace(reward="static", llm_weight=False, site="", ground_cells=0),
+        )
     else:
         cfg = RunConfig()
     for r in runs:
