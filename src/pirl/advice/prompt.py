@@ -100,6 +100,9 @@ def template_hash(path: str | Path) -> str:
     return load_template(path)[1]
 
 
+SPHERES_HEADER = "Obstacles (spheres, center [x, y, z] and radius)"
+"""The obstacle line's header in the paper variant (a site's prompt says Buildings)."""
+
 COMPACT_TEMPLATE = (
     "pan: <-90..90>, tilt: <0..90>, zoom: <0.5..2.0>, X: <-1|0|1>, Y: <-1|0|1>, Z: <-1|0|1>"
 )
@@ -128,6 +131,9 @@ class PromptState:
             blank off the grid (templates only; the built-in prompts do not show it).
         coarse_map: the grid in blocks, one digit per block: the tenths seen (9 = 90% or
             more), rows of y, top = highest (templates only).
+        buildings: a site's map (no spheres): the blocked columns near the UAV as
+            ``x,y:n`` (blocked from the ground up through n levels), nearest first; shown in
+            place of the obstacle list. Empty in generated worlds, whose text is unchanged.
     """
 
     position: tuple[int, int, int]
@@ -144,6 +150,7 @@ class PromptState:
     max_range: float = 8.0
     local_map: str = ""
     coarse_map: str = ""
+    buildings: str = ""
 
     def __post_init__(self) -> None:
         if self.footprint not in FOOTPRINTS:
@@ -183,6 +190,9 @@ def _zoom(value: float) -> str:
 
 
 def _obstacles(state: PromptState, compact: bool) -> str:
+    if state.buildings:
+        what = "blocked x,y:levels" if compact else "blocked columns near the UAV as x,y:levels"
+        return f"{what} {state.buildings}"
     if not state.obstacles:
         return "none"
     items = []
@@ -323,7 +333,8 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
             f"Camera [fov,resolution,tilt,pan,zoom]: {camera}\n"
             f"Battery {battery}, coverage {coverage}\n"
             f"View now: {_view_now(state, compact=True)}\n"
-            f"Obstacles [x,y,z,radius]: {_obstacles(state, compact=True)}"
+            f"{'Buildings' if state.buildings else 'Obstacles [x,y,z,radius]'}: "
+            f"{_obstacles(state, compact=True)}"
         )
     return (
         "[Task]\n"
@@ -343,5 +354,5 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
         f"Battery: {battery} (1 full, 0 empty)\n"
         f"Coverage: {coverage} (share of ground cells seen)\n"
         f"View cone now: {_view_now(state, compact=False)}\n"
-        f"Obstacles (spheres, center [x, y, z] and radius): {_obstacles(state, compact=False)}"
+        f"{'Buildings' if state.buildings else SPHERES_HEADER}: {_obstacles(state, compact=False)}"
     )

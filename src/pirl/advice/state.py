@@ -48,7 +48,32 @@ def view_prompt_state(view: WorldView, maps: bool = False) -> PromptState:
         max_range=cfg.max_range,
         local_map=local,
         coarse_map=coarse,
+        buildings=buildings_near(view) if cfg.site else "",
     )
+
+
+BUILDINGS_RADIUS = 4
+"""Cells round the UAV whose blocked columns a site's prompt lists."""
+BUILDINGS_MAX = 24
+"""Most columns a site's prompt lists (the nearest)."""
+
+
+def buildings_near(view: WorldView) -> str:
+    """The blocked columns within :data:`BUILDINGS_RADIUS` of the UAV as ``x,y:n`` (blocked
+    from the ground through n levels; a no-fly column through every level), nearest first:
+    a few short tokens a small model can read, where listing a site's voxels would not fit."""
+    x, y, _ = (int(v) for v in view.position)
+    sx, sy, _ = view.blocked.shape
+    r = BUILDINGS_RADIUS
+    x0, x1, y0, y1 = max(0, x - r), min(sx, x + r + 1), max(0, y - r), min(sy, y + r + 1)
+    window = view.blocked[x0:x1, y0:y1]
+    levels = window.sum(axis=2)
+    cells = [
+        (abs(i + x0 - x) + abs(j + y0 - y), i + x0, j + y0, int(levels[i, j]))
+        for i, j in zip(*np.nonzero(levels), strict=True)
+    ]
+    cells.sort()
+    return " ".join(f"{i},{j}:{n}" for _, i, j, n in cells[:BUILDINGS_MAX]) or "none"
 
 
 def text_maps(view: WorldView) -> tuple[str, str]:

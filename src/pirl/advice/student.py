@@ -126,6 +126,9 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
         for name in ("obs_visits", "obs_target", "obs_target_path")
         if getattr(env_cfg, name, False)
     ]  # fmt: skip
+    # A site's prompts list its buildings (a map prompt): answers about one site stay its own.
+    if getattr(env_cfg, "site", ""):
+        parts.append(f"site={env_cfg.site}")
     digest = hashlib.sha256(json.dumps(parts, default=str).encode()).hexdigest()[:16]
     return f"{advisor.name}:{advisor.model}:{digest}"
 
