@@ -28,6 +28,7 @@ UAVSIM = Path(__file__).parent / "data" / "uavsim" / "manhattan32.png"
 OLD_HASHES = {
     "paper": "ecd157523b21feeae8d8115ef3c61f33fb2a8035eb15ae1b09da0893238cf298",
     "frustum-occlusion": "6a0e47f5ad10b5784c6151eed194d5281df4f7997397d5e7e75e8eb5e1446aa0",
+    "target-line": "74d7c835f50a0abec028d1d17665a1cbd3774f6380a251cb2dca7b5d131e897a",
 }
 
 

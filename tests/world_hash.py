@@ -20,6 +20,7 @@ CONFIGS = {
         "size": (20, 16, 4), "footprint": "frustum", "occlusion": True, "obstacles_max": 8,
         "obs_target": True, "obs_target_path": True, "obs_visits": True,
     },
+    "target-line": {"size": (24, 18, 3), "obs_target": True, "obstacles_max": 6},
 }  # fmt: skip
 """The configurations hashed: the paper's default, and the frustum camera with occlusion."""
 

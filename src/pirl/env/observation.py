@@ -84,9 +84,10 @@ def path_to_work(w, e, x, y, z, sx, sy):
     move towards the nearest coverable cell not yet covered, and the number of moves; moves -1
     when none is reachable at that altitude. Unlike the straight line, this way round an
     obstacle never points into it, so a greedy policy that follows it cannot oscillate in
-    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing)."""
+    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
+    -1 everywhere between calls, and only the cells a search reached are reset after it, so
+    a search costs the cells it explores, not the grid (a 256 x 256 site)."""
     queue, seen = w.path[e, 0], w.path[e, 1]
-    seen[: sx * sy] = -1
     start = x * sy + y
     seen[start] = 0
     queue[0] = start
@@ -97,7 +98,10 @@ def path_to_work(w, e, x, y, z, sx, sy):
         cx, cy = c // sy, c % sy
         if c != start and w.coverable[e, cx, cy] and w.views[e, cx, cy] == 0:
             m = seen[c] % 4
-            return MOVE_DX[m], MOVE_DY[m], seen[c] // 4
+            found = MOVE_DX[m], MOVE_DY[m], seen[c] // 4
+            for r in range(tail):
+                seen[queue[r]] = -1
+            return found
         for m in range(4):
             nx, ny = cx + MOVE_DX[m], cy + MOVE_DY[m]
             if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[e, nx, ny, z]:
@@ -107,7 +111,36 @@ def path_to_work(w, e, x, y, z, sx, sy):
                     seen[k] = (seen[c] // 4 + 1) * 4 + (m if c == start else seen[c] % 4)
                     queue[tail] = k
                     tail += 1
+    for r in range(tail):
+        seen[queue[r]] = -1
     return 0, 0, -1
+
+
+@numba.njit(cache=True, inline="always")
+def nearest_work(coverable, views, x, y):
+    """(d2, i, j) of the coverable cell not yet covered nearest to (x, y) (squared distance;
+    on a tie the smallest (i, j)), or d2 = -1 when none is left. Searched ring by ring
+    outwards, stopping once no nearer cell can lie beyond: the cost grows with the distance
+    to the work, not with the grid."""
+    sx, sy = coverable.shape
+    best, bi, bj = -1, 0, 0
+    for r in range(max(x, sx - 1 - x, y, sy - 1 - y) + 1):
+        if best >= 0 and r * r > best:
+            break  # every cell of ring r lies at least r away
+        for i in range(max(0, x - r), min(sx, x + r + 1)):
+            edge = i == x - r or i == x + r
+            j = max(0, y - r)
+            while j < min(sy, y + r + 1):
+                if coverable[i, j] and views[i, j] == 0:
+                    d2 = (i - x) * (i - x) + (j - y) * (j - y)
+                    if best < 0 or d2 < best or (d2 == best and (i < bi or (i == bi and j < bj))):
+                        best, bi, bj = d2, i, j
+                # Inside the ring's side columns only its two ends belong to the ring.
+                if edge or j >= y + r:
+                    j += 1
+                else:
+                    j = y + r if y + r > j else j + 1
+    return best, bi, bj
 
 
 @numba.njit(cache=True, inline="always")
@@ -174,14 +207,7 @@ def observation(w, p, layout, e, out):
             return
         # The straight line: without obs_target_path, or when no way is open at this altitude
         # (when a way is open the search alone runs: the hot path does one pass, not two).
-        best = -1
-        bi, bj = 0, 0
-        for i in range(sx):
-            for j in range(sy):
-                if coverable[e, i, j] and views[e, i, j] == 0:
-                    d2 = (i - x) * (i - x) + (j - y) * (j - y)
-                    if best < 0 or d2 < best:
-                        best, bi, bj = d2, i, j
+        best, bi, bj = nearest_work(coverable[e], views[e], x, y)
         if best <= 0:  # none left, or the UAV is above one
             o[k], o[k + 1], o[k + 2] = 0.5, 0.5, 0.0
         else:

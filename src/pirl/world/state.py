@@ -322,6 +322,7 @@ class WorldBatch:
             buf=np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64),
             path=np.zeros((num, 2, sx * sy), dtype=np.int32),
         )
+        self.arrays.path[:, 1] = -1  # the path search's "not reached" (it keeps it so)
         self.params = Params(
             *self.lens,
             size_z=int(sz),
