@@ -290,6 +290,9 @@ class ReproduceSettings(Settings, section="reproduce"):
     """Worlds flown in the physics simulator (empty = no physics table)."""
     physics_episodes: int = 100
     """Scenarios per size in the physics simulator (the same seeds as the grid's first ones)."""
+    sites: tuple[str, ...] = ()
+    """Site folders (docs/sites.md) every method is also evaluated on, zero-shot, in the grid
+    simulator (relative paths: from the working folder, else from the repository)."""
     workers: int = 2
     """Evaluation worker processes."""
     gif_every: int = 2

@@ -21,7 +21,7 @@ import yaml
 
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.evaluate.physics_report import physics_gap_table
-from pirl.evaluate.summary import honest_label, read_summary
+from pirl.evaluate.summary import honest_label, read_summary, size_key
 
 # The paper's results (its tables): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
@@ -107,7 +107,7 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
         sim_rows = [r for r in rows if r["sim"] == sim]
         if not sim_rows:
             continue
-        sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
+        sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
         by = {(r["method"], r["size"]): r for r in sim_rows}
         methods = [m for m in PAPER_METHODS if any((m, s) in by for s in sizes)]
         extras = sorted({r["method"] for r in sim_rows} - set(PAPER_METHODS), key=_method_order)
@@ -369,7 +369,7 @@ def summary_lines(
             f"{', '.join(map(str, seeds))}, more seeds narrow the intervals."
         )
     grid = [r for r in _act_rows(rows, act) if r["sim"] == "grid"]
-    sizes = sorted({r["size"] for r in grid}, key=lambda z: [int(v) for v in z.split("x")])
+    sizes = sorted({r["size"] for r in grid}, key=size_key)
     gaps = []
     for size in sizes:
         here = [r for r in grid if r["size"] == size]
@@ -413,7 +413,7 @@ def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str =
     import matplotlib.pyplot as plt
 
     sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
-    sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
+    sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
     methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
     labels = {r["method"]: f"{r['label']} ({int(r.get('seeds', 1))} seeds)" for r in sim_rows}
     by = {(r["method"], r["size"]): r for r in sim_rows}
@@ -454,7 +454,7 @@ def bar_figure(
 
     act = act or acts_of(rows)[0]
     sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
-    sizes = sorted({r["size"] for r in sim_rows}, key=lambda s: [int(v) for v in s.split("x")])
+    sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
     methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
     labels = {r["method"]: r["label"] for r in sim_rows}
     by = {(r["method"], r["size"]): r for r in sim_rows}

@@ -126,6 +126,23 @@ def plan_runs(cfg: RunConfig, advisor: str) -> list[PlannedRun]:
     return plan
 
 
+def profile_sites(cfg: RunConfig) -> list[str]:
+    """``reproduce.sites`` as site folders, each checked (one line for a bad one)."""
+    from pirl.world.seeable import with_site
+    from pirl.world.site import site_folder
+
+    repo = Path(__file__).resolve().parents[3]
+    folders = []
+    for name in cfg.reproduce.sites:
+        path = Path(name).expanduser()
+        if not path.is_absolute() and not path.exists() and (repo / path).exists():
+            path = repo / path
+        folder = str(site_folder(path).resolve())
+        with_site(cfg.env, folder)
+        folders.append(folder)
+    return folders
+
+
 def default_workers() -> int:
     """Cores this process may use."""
     try:
@@ -382,6 +399,10 @@ def describe_plan(
         )
     train_min = ppo_s / max(1, min(train_workers, len(todo) + len(phases) or 1)) / 60
     sizes = [parse_size(s) for s in rp.sizes]
+    from pirl.world.site import load_site
+
+    # A site costs about what a generated world of its grid costs.
+    sizes += [load_site(folder).size for folder in profile_sites(cfg)]
     learned = len(jobs) * len(rp.acts)
     eval_s = 0.0
     for size in sizes:
@@ -404,7 +425,7 @@ def describe_plan(
         f"seeds {list(rp.seeds)}, in {train_workers} worker processes: about "
         f"{train_min:.0f} min",
         f"plan: evaluation of {total_eval:,} episodes of trained policies "
-        f"({rp.episodes} scenarios x {len(sizes)} sizes x {len(rp.acts)} act modes x "
+        f"({rp.episodes} scenarios x {len(sizes)} sizes and sites x {len(rp.acts)} act modes x "
         f"{len(jobs)} runs), the built-ins and {physics_eps} physics episodes in "
         f"{eval_workers} processes: about {eval_min:.0f} min",
         f"plan: about {(train_min + eval_min) / 60:.1f} h in all (rates measured on a 2-core "
@@ -474,6 +495,7 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
     rp = cfg.reproduce
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
     check_layouts(cfg.env, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
+    profile_sites(cfg)
 
 
 def reproduce(
@@ -518,8 +540,10 @@ def reproduce(
         sim_episodes={"physics": rp.physics_episodes},
         acts=list(rp.acts),
         sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
+        sites=profile_sites(cfg),
     )
-    log(f"evaluating {len(specs)} methods on {', '.join(map(str, rp.sizes))}")
+    where = [*map(str, rp.sizes), *(f"site {Path(s).name}" for s in plan.sites)]
+    log(f"evaluating {len(specs)} methods on {', '.join(where)}")
     # The animations record in processes of their own beside the evaluation's.
     with process_pool(workers or rp.workers) as gif_pool:
         gif_jobs = start_gifs(gif_pool, cfg, runs, advisor, out / "report" / "gifs")

@@ -192,10 +192,14 @@ def unshaped_warnings(rows: list[dict[str, Any]]) -> list[str]:
 
 def _order(key: tuple[str, ...]) -> tuple:
     method, sim, size, act = key
-    # Generated sizes by their dimensions, then sites by name.
+    return (sim, act, method, size_key(size))
+
+
+def size_key(size: str) -> tuple:
+    """Sort key of a row's ``size``: generated sizes by their dimensions, then sites by name."""
     if size.startswith(SITE_PREFIX):
-        return (sim, act, method, (1, size))
-    return (sim, act, method, (0, tuple(int(v) for v in size.split("x"))))
+        return (1, size)
+    return (0, tuple(int(v) for v in size.split("x")))
 
 
 def write_summary(records: list[dict[str, Any]], path: Path) -> list[dict[str, Any]]:
