@@ -299,3 +299,35 @@ def test_bad_sites_are_refused_in_one_line(tmp_path: Path, name: str) -> None:
         proc = pirl("render", "--policy", "boustrophedon", "--site", str(folder), "--out", str(out))
         one_error_line(proc, MISTAKES[name])
         assert not out.exists()
+
+
+# -- physics -------------------------------------------------------------------------------
+def test_boxes_cover_exactly_the_voxels() -> None:
+    from pirl.world.boxes import merge_boxes
+
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        grid = rng.random((9, 7, 4)) < 0.4
+        filled = np.zeros(grid.shape, dtype=int)
+        for x0, y0, z0, x1, y1, z1 in merge_boxes(grid):
+            filled[x0 : x1 + 1, y0 : y1 + 1, z0 : z1 + 1] += 1
+        assert (filled == grid).all()  # disjoint, and their union is the grid
+    town = load_site(EXAMPLES / "town")
+    assert len(merge_boxes(town.occluding)) < town.occluding.sum() / 100
+
+
+def test_pyflyt_flies_a_site_among_its_buildings(tmp_path: Path) -> None:
+    from pirl.agents.loading import load_policy
+    from pirl.physics.mission import Mission
+    from pirl.physics.pyflyt_backend import run_physics_episode
+
+    h = np.zeros((8, 8))
+    h[2:5, 3:6] = 12.0  # one building, 2 levels of 10 m
+    folder = write_site(tmp_path / "s", h, cell_size_m=10.0, start=[0, 0])
+    cfg = with_site(VCPPConfig(), str(folder)).replace(max_steps=4, scale_by_alpha=False)
+    mission = Mission(cfg)
+    mission.reset(seed=1)
+    boxes = mission.obstacle_boxes_m()
+    assert len(boxes) == 1 and boxes[0, 2] - boxes[0, 5] == 0.0  # it stands on the ground
+    metrics = run_physics_episode(cfg, load_policy("boustrophedon", seed=0), 1)
+    assert metrics["steps"] == 4 and metrics["collisions"] == 0 and metrics["vcr"] > 0

@@ -261,7 +261,7 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
             # A batched chunk is best large: one chunk per worker; else two per worker.
             batched = plan.batched and sim == "grid" and act != FIXED
             worlds: list[Any] = list(plan.sim_sizes.get(sim, plan.sizes))
-            worlds += plan.sites if sim == "grid" else []
+            worlds += plan.sites
             for size in worlds:
                 seeds = scenario_seeds(_grid_size(size), episodes)
                 parts = max(1, workers if batched else 2 * workers)
@@ -553,10 +553,6 @@ def evaluate_runs(
     size_list = [parse_size(s) for s in sizes]
     check_layouts(cfg.env, size_list, episodes)  # batched: a chunk of worlds per worker
     site_list = [str(site_folder(s).resolve()) for s in sites or []]
-    if site_list and "physics" in (sims or []):
-        raise ConfigError(
-            "--site with --sim physics: sites fly in the grid simulator only in this version"
-        )
     for site in site_list:  # refused here, in one line, before out is touched
         with_site(cfg.env, site)
     plan = EvalPlan(

@@ -183,6 +183,24 @@ class Mission:
             out[k, 3] = r * self.physics.cell_size_m
         return out
 
+    def obstacle_boxes_m(self) -> np.ndarray:
+        """A site's buildings as a few boxes in metres: rows (cx, cy, cz, half x, half y,
+        half z); none in a generated world. Level 0's boxes stand on the ground (z = 0)."""
+        if self.scenario is None:
+            raise RuntimeError("call reset() first")
+        if self.scenario.grids is None:
+            return np.zeros((0, 6))
+        from pirl.world.boxes import merge_boxes
+
+        c, lh = self.physics.cell_size_m, self.physics.level_height_m
+        boxes = merge_boxes(self.scenario.grids.occluding)
+        out = np.zeros((len(boxes), 6))
+        for n, (x0, y0, z0, x1, y1, z1) in enumerate(boxes):
+            lo = np.array([(x0 - 0.5) * c, (y0 - 0.5) * c, 0.0 if z0 == 0 else (z0 + 0.5) * lh])
+            hi = np.array([(x1 + 0.5) * c, (y1 + 0.5) * c, (z1 + 1.5) * lh])
+            out[n, :3], out[n, 3:] = (lo + hi) / 2, (hi - lo) / 2
+        return out
+
     def camera(self) -> tuple[int, int, int]:
         """The gimbal's setting now: (tilt degrees, pan degrees, zoom tenths)."""
         return self.world.camera_setting(0)

@@ -123,6 +123,16 @@ class PyFlytFlight:
                 baseMass=0.0, baseCollisionShapeIndex=shape, basePosition=[cx, cy, cz]
             )
             self.sphere_ids.append(body)
+        for row in mission.obstacle_boxes_m():  # a site: its buildings, merged into boxes
+            shape = av.createCollisionShape(
+                pybullet.GEOM_BOX, halfExtents=[float(v) for v in row[3:]]
+            )
+            body = av.createMultiBody(
+                baseMass=0.0,
+                baseCollisionShapeIndex=shape,
+                basePosition=[float(v) for v in row[:3]],
+            )
+            self.sphere_ids.append(body)
         av.register_all_new_bodies()
         self._spheres = np.array(self.sphere_ids, dtype=np.int64)
 
