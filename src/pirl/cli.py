@@ -720,6 +720,75 @@ def main() -> None:
     app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
 
 
+@app.command()
+@_clean_errors
+def plan(
+    out: Annotated[Path, typer.Option(help="The mission folder to write (must not exist).")],
+    site: Annotated[Path | None, typer.Option(help="A site folder (docs/sites.md).")] = None,
+    size: Annotated[
+        tuple[int, int, int] | None, typer.Option(help="A generated world X Y Z instead.")
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Scenario seed (start cell; obstacles).")] = 0,
+    policy: Annotated[Path | None, typer.Option(help="A trained run folder to fly.")] = None,
+    method: Annotated[
+        str | None, typer.Option(help="A built-in instead: boustrophedon or random.")
+    ] = None,
+    act: Annotated[str, typer.Option(help="A trained policy: greedy or stochastic.")] = "greedy",
+    gimbal: Annotated[
+        str, typer.Option(help="v2: DO_GIMBAL_MANAGER_PITCHYAW; v1: DO_MOUNT_CONTROL.")
+    ] = "v2",
+    config: Annotated[
+        Path | None, typer.Option(help="A preset whose mission section sets speeds and limits.")
+    ] = None,
+) -> None:
+    """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
+    GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
+    from pirl.config.run import RunConfig
+    from pirl.evaluate.missions import write_mission
+
+    check_seed(seed)
+    if (site is None) == (size is None):
+        raise ConfigError("give --site SITE or --size X Y Z (one of them)")
+    if (policy is None) == (method is None):
+        raise ConfigError("give --policy runs/NAME or --method boustrophedon (one of them)")
+    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    env = cfg.env
+    if policy is not None:
+        from pirl.agents.loading import load_policy
+
+        run_cfg = policy / "config.yaml"
+        if not (policy / "model.zip").is_file() or not run_cfg.is_file():
+            raise ConfigError(
+                f"--policy {policy}: not a finished run (no model.zip and config.yaml)"
+            )
+        env = RunConfig.from_yaml(run_cfg).env.replace(site="", ground_cells=0, reward="static",
+                                                       llm_weight=False)  # fmt: skip
+        if act not in ("greedy", "stochastic"):
+            raise ConfigError(f"--act {act!r}: allowed values are greedy, stochastic")
+        chosen = load_policy(policy, seed=seed, act=act)
+        what = f"{chosen.label if hasattr(chosen, 'label') else policy.name} (act {act})"
+    else:
+        if method not in ("boustrophedon", "random"):
+            raise ConfigError(f"--method {method!r}: allowed values are boustrophedon, random")
+        chosen = _make_policy(method, seed)
+        what = str(getattr(chosen, "label", method))
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        env = with_site(env, str(site))
+    else:
+        env = env.replace(size=tuple(size), site="", ground_cells=0)
+    summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
+    console.print(
+        f"{what}: VCR {summary['vcr']:.3f} over seeable cells; {summary['sorties']} sortie(s), "
+        f"items {summary['items_per_sortie']} ({summary['items_before_merging']} before "
+        f"merging legs), {summary['distance_m']:,.0f} m, {summary['flight_time_s'] / 60:.1f} min "
+        f"at {cfg.mission.speed_m_s:g} m/s, {summary['photos']} photos"
+        + ("" if summary["real_place"] else "; NOT a real place (a generated world)")
+    )
+    console.print(f"wrote {out}: {', '.join(summary['files'])}")
+
+
 site_app = typer.Typer(no_args_is_help=True, help="Bring your own site (docs/sites.md).")
 app.add_typer(site_app, name="site")
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pirl.config.load import Settings, check_keys, check_seed
+from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 
@@ -359,6 +360,8 @@ class RunConfig(Settings):
     """What ``pirl reproduce`` trains and evaluates."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The physics simulator (``--sim physics``): wind, cell size, energy, timeouts."""
+    mission: MissionSettings = field(default_factory=MissionSettings)
+    """Missions written by ``pirl plan``: speeds, battery, item and altitude limits."""
 
     def validate(self) -> None:
         """``advisor.prompt_file`` becomes the prompt (``pare.prompt_variant: file:<path>``,

@@ -232,7 +232,7 @@ def _read_raster(folder: Path, s: SiteSettings) -> _Raster:
     _check_pixels(values.shape[0], values.shape[1], s)
     crs = ""
     if s.origin:
-        crs = _local_crs(s.origin)
+        crs = local_crs(s.origin)
     return _Raster(values, pixel, crs, 0.0, 0.0)
 
 
@@ -266,7 +266,7 @@ def _read_geotiff(path: Path, s: SiteSettings) -> _Raster:
                 )
             band = src.read(1, masked=True).astype(np.float64).filled(np.nan)
             pixel = s.pixel_size_m or s.cell_size_m or DEFAULT_CELL_M
-            return _Raster(band, pixel, _local_crs(s.origin), 0.0, 0.0)
+            return _Raster(band, pixel, local_crs(s.origin), 0.0, 0.0)
         if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.e >= 0:
             raise ConfigError(
                 f"site.heights: {path.name} is rotated or not north-up; warp it to a north-up "
@@ -293,11 +293,12 @@ def _read_geotiff(path: Path, s: SiteSettings) -> _Raster:
                 f"site.heights: {path.name} has no CRS; give site.origin [lat, lon] of its "
                 "south-west corner"
             )
-        return _Raster(values, s.pixel_size_m or pixel, _local_crs(s.origin), 0.0, 0.0)
+        return _Raster(values, s.pixel_size_m or pixel, local_crs(s.origin), 0.0, 0.0)
     return _Raster(values, pixel, crs.to_wkt(), west, south)
 
 
-def _local_crs(origin: tuple[float, ...]) -> str:
+def local_crs(origin: tuple[float, ...]) -> str:
+    """A metric CRS of metres east and north of ``origin`` (lat, lon)."""
     lat, lon = origin
     # Azimuthal equidistant centred on the south-west corner: metres east and north of it.
     return f"+proj=aeqd +lat_0={lat} +lon_0={lon} +x_0=0 +y_0=0 +datum=WGS84 +units=m +no_defs"
@@ -453,6 +454,7 @@ __all__ = [
     "GeoRef",
     "Site",
     "load_site",
+    "local_crs",
     "read_polygons",
     "site_folder",
 ]

@@ -1,0 +1,58 @@
+"""Settings of a written mission (``pirl plan``): speeds, battery, limits (docs/missions.md)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pirl.config.load import Settings
+
+DEFAULT_ORIGIN = (47.397742, 8.545594)
+"""Where a generated world (or a site without a geo-reference) is placed: PX4's simulated
+home in Zurich. Not a real survey site; every file written there says so."""
+
+
+@dataclass(frozen=True)
+class MissionSettings(Settings, section="mission"):
+    """Every setting of a mission ``pirl plan`` writes."""
+
+    speed_m_s: float = 5.0
+    """Cruise speed between waypoints (the flight time's estimate)."""
+    climb_m_s: float = 2.0
+    """Vertical speed of take-off, climbs and descents."""
+    photo_s: float = 1.0
+    """Time one photo, camera change or hover step takes."""
+    battery_s: float = 1200.0
+    """Flight time of one battery; a longer mission is split into sorties."""
+    reserve: float = 0.2
+    """Share of the battery kept in reserve (the return home is always planned in)."""
+    max_items: int = 500
+    """Most mission items one sortie may hold (autopilots hold a few hundred to a thousand)."""
+    min_alt_m: float = 5.0
+    """Refuse a plan with a waypoint lower than this above home."""
+    max_alt_m: float = 120.0
+    """Refuse a plan with a waypoint higher than this above home."""
+    cell_size_m: float = 10.0
+    """Metres per cell of a generated world (a site has its own)."""
+    level_height_m: float = 10.0
+    """Metres between flight levels of a generated world (a site has its own)."""
+    autopilot: str = "px4"
+    """The .plan's firmware type: px4 or ardupilot."""
+
+    def validate(self) -> None:
+        """Positive speeds, times and sizes; a reserve in [0, 1); ordered altitude limits."""
+        self.require_positive(
+            "speed_m_s", "climb_m_s", "battery_s", "max_items", "cell_size_m", "level_height_m"
+        )
+        if not (math.isfinite(self.photo_s) and self.photo_s >= 0):
+            raise self.refuse("photo_s", "must be >= 0")
+        if not 0 <= self.reserve < 1:
+            raise self.refuse("reserve", "allowed range is [0, 1)")
+        if not 0 <= self.min_alt_m < self.max_alt_m:
+            raise self.refuse("max_alt_m", "need 0 <= min_alt_m < max_alt_m")
+        if self.max_items < 8:
+            raise self.refuse("max_items", "must be >= 8 (take-off, a leg, return)")
+        self.require_choice("autopilot", ("px4", "ardupilot"))
+
+
+__all__ = ["DEFAULT_ORIGIN", "MissionSettings"]

@@ -1,0 +1,147 @@
+"""pirl plan: missions written with pymavlink's numbers, read back by pymavlink's own loader,
+split into sorties, placed on the Earth, and refused in one line when they cannot be flown."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from pymavlink import mavwp
+from pymavlink.dialects.v20 import common as mav
+
+from cli_checks import one_error_line
+
+ROOT = Path(__file__).resolve().parents[1]
+CAMPUS = ROOT / "examples" / "sites" / "campus"
+
+
+def pirl(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pirl", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def plan(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    proc = pirl("plan", "--method", "boustrophedon", "--out", str(out), *extra)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def same(a: float | None, b: float) -> bool:
+    if a is None:
+        return math.isnan(b)
+    return abs(a - b) < 1e-5 * max(1.0, abs(a))
+
+
+def check_plan_against_waypoints(folder: Path, name: str) -> list[dict]:
+    data = json.loads((folder / f"{name}.plan").read_text())
+    assert data["fileType"] == "Plan" and data["mission"]["firmwareType"] == mav.MAV_AUTOPILOT_PX4
+    items = data["mission"]["items"]
+    loader = mavwp.MAVWPLoader()
+    assert loader.load(str(folder / f"{name}.waypoints")) == len(items) + 1  # home first
+    home = loader.wp(0)
+    assert same(data["mission"]["plannedHomePosition"][0], home.x)
+    for n, item in enumerate(items, start=1):
+        wp = loader.wp(n)
+        assert (wp.command, wp.frame) == (item["command"], item["frame"])
+        got = [wp.param1, wp.param2, wp.param3, wp.param4, wp.x, wp.y, wp.z]
+        assert all(same(a, b) for a, b in zip(item["params"], got, strict=True)), (n, item, got)
+    return items
+
+
+def test_a_generated_world_plan_reads_back_with_pymavlink(tmp_path: Path) -> None:
+    out = tmp_path / "m"
+    plan(out, "--size", "30", "30", "3", "--seed", "2")
+    items = check_plan_against_waypoints(out, "mission")
+    commands = [i["command"] for i in items]
+    assert (
+        commands[0] == mav.MAV_CMD_NAV_TAKEOFF and commands[-1] == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+    )
+    assert mav.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW in commands
+    assert mav.MAV_CMD_SET_CAMERA_ZOOM in commands and mav.MAV_CMD_IMAGE_START_CAPTURE in commands
+    assert all(
+        i["frame"] == mav.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        for i in items if i["command"] == mav.MAV_CMD_NAV_WAYPOINT
+    )  # fmt: skip
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["vcr"] >= 0.99 and not summary["real_place"]
+    assert summary["items_after_merging"] < summary["items_before_merging"] / 3
+    assert "NOT A REAL PLACE" in (out / "path.kml").read_text()
+    kinds = {
+        f["properties"]["kind"] for f in json.loads((out / "path.geojson").read_text())["features"]
+    }
+    assert kinds == {"flight", "waypoint", "footprint"}
+
+
+def test_gimbal_v1_uses_mount_control(tmp_path: Path) -> None:
+    out = tmp_path / "m"
+    plan(out, "--size", "15", "15", "3", "--gimbal", "v1")
+    items = check_plan_against_waypoints(out, "mission")
+    commands = {i["command"] for i in items}
+    assert mav.MAV_CMD_DO_MOUNT_CONTROL in commands
+    assert mav.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW not in commands
+
+
+def test_a_long_mission_splits_into_sorties_that_cover_the_same(tmp_path: Path) -> None:
+    one, split = tmp_path / "one", tmp_path / "split"
+    plan(one, "--size", "30", "30", "3", "--seed", "1")
+    preset = tmp_path / "short.yaml"
+    preset.write_text("mission:\n  battery_s: 150\n  reserve: 0.1\n")
+    plan(split, "--size", "30", "30", "3", "--seed", "1", "--config", str(preset))
+    summary = json.loads((split / "summary.json").read_text())
+    assert summary["sorties"] >= 2 and not (split / "mission.plan").exists()
+
+    def stops(items: list[dict]) -> set[tuple]:
+        return {tuple(round(v, 7) for v in i["params"][4:7]) for i in items
+                if i["command"] == mav.MAV_CMD_NAV_WAYPOINT}  # fmt: skip
+
+    union = set()
+    for n in range(1, summary["sorties"] + 1):
+        items = check_plan_against_waypoints(split, f"sortie-{n}")
+        assert items[0]["command"] == mav.MAV_CMD_NAV_TAKEOFF
+        assert items[-1]["command"] == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+        union |= stops(items)
+    assert union == stops(check_plan_against_waypoints(one, "mission"))
+    assert summary["photos"] == json.loads((one / "summary.json").read_text())["photos"]
+
+
+def test_a_site_plan_is_on_the_earth_with_its_fences(tmp_path: Path) -> None:
+    out = tmp_path / "campus"
+    plan(out, "--site", str(CAMPUS))
+    data = json.loads((out / "mission.plan").read_text())
+    lat, lon, _ = data["mission"]["plannedHomePosition"]
+    assert 48.1 < lat < 48.2 and 11.5 < lon < 11.6
+    fences = data["geoFence"]["polygons"]
+    assert {f["inclusion"] for f in fences} == {True, False}
+    assert json.loads((out / "summary.json").read_text())["real_place"]
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--size", "15", "15", "3", "--policy", "nowhere"], "not a finished run"),
+        (["--size", "15", "15", "3"], "--policy runs/NAME or --method"),
+        (["--method", "boustrophedon"], "--site SITE or --size"),
+    ],
+)
+def test_bad_plans_are_one_line(tmp_path: Path, args: list[str], needle: str) -> None:
+    out = tmp_path / "m"
+    one_error_line(pirl("plan", *args, "--out", str(out)), needle)
+    assert not out.exists()
+
+
+def test_altitude_limits_and_an_existing_folder_refuse(tmp_path: Path) -> None:
+    preset = tmp_path / "low.yaml"
+    preset.write_text("mission:\n  max_alt_m: 15\n")
+    out = tmp_path / "m"
+    proc = pirl("plan", "--size", "15", "15", "3", "--method", "boustrophedon",
+                "--config", str(preset), "--out", str(out))  # fmt: skip
+    one_error_line(proc, "mission.max_alt_m=15")
+    assert not out.exists() and not list(tmp_path.glob(".m.*"))
+    out.mkdir()
+    proc = pirl("plan", "--size", "15", "15", "3", "--method", "boustrophedon", "--out", str(out))
+    one_error_line(proc, "already exists")
