@@ -11,6 +11,7 @@ import yaml
 
 from pirl.config.errors import ConfigError
 from pirl.config.load import Settings
+from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.run import (
     AdvisorSettings,
@@ -25,7 +26,7 @@ from pirl.config.world import VCPPConfig
 
 SECTIONS = (
     VCPPConfig, PPOSettings, TrainSettings, PareSettings, AdvisorSettings, ILSettings,
-    ReproduceSettings, PhysicsConfig,
+    ReproduceSettings, PhysicsConfig, MissionSettings,
 )  # fmt: skip
 CONFIG = Path(__file__).resolve().parents[1] / "src" / "pirl" / "config"
 PRESETS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
