@@ -225,6 +225,32 @@ def test_evaluate_site_planner_covers_seeable_cells(tmp_path: Path) -> None:
     assert all(r["vcr"] >= 0.99 and r["vcr_all"] < r["vcr"] for r in rows)
 
 
+def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
+    from pirl.evaluate.physics_report import physics_gap_table
+    from pirl.evaluate.report import camera_table, improvements, markdown_tables
+    from pirl.evaluate.summary import read_summary
+
+    out = tmp_path / "eval"
+    proc = pirl(
+        "evaluate", "--methods", "boustrophedon", "random", "--sizes", "15",
+        "--site", str(EXAMPLES / "campus"), "--episodes", "2", "--out", str(out),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    rows = read_summary(out / "summary.csv")
+    assert [r["size"] for r in rows if r["method"] == "random"] == ["15x15x3", "site:campus"]
+    assert "site:campus VCR" in markdown_tables(rows, "fixed")
+    assert "site:campus" in camera_table(rows)
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    # The planner's rows as a two-seed PIRL and the same as physics rows: the P(improvement)
+    # and the physics gap tables sort a site beside a size too.
+    as_pirl = [{**r, "method": "pirl", "train_seed": k % 2, "act": "stochastic"}
+               for k, r in enumerate(records) if r["method"] == "boustrophedon"]  # fmt: skip
+    found = improvements(records + as_pirl, "stochastic")
+    assert {c["size"] for c in found} == {"15x15x3", "site:campus"}
+    physics = [{**r, "sim": "physics"} for r in as_pirl]
+    assert "site:campus" in physics_gap_table(as_pirl + physics)
+
+
 # -- mistakes -------------------------------------------------------------------------------
 def bad_site(tmp_path: Path, name: str) -> Path:
     folder = tmp_path / name

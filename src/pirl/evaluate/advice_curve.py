@@ -65,8 +65,9 @@ def curve_points(
 ) -> tuple[list[CurvePoint], dict[str, dict[str, float]]]:
     """Every (advisor, size) point, and PPO-EWRI's IQM and interval per size (``baseline``:
     its run folders)."""
-    sizes = sorted({r["size"] for r in records if r.get("sim", "grid") == "grid"},
-                   key=lambda s: [int(v) for v in s.split("x")])  # fmt: skip
+    from pirl.evaluate.summary import size_key
+
+    sizes = sorted({r["size"] for r in records if r.get("sim", "grid") == "grid"}, key=size_key)
     points, band = [], {}
     for size in sizes:
         base = _scores(records, baseline, size, act)

@@ -27,8 +27,10 @@ def _key(r: dict[str, Any]) -> tuple:
     return (r["method"], r.get("train_seed"), r["size"], r.get("act", "fixed"))
 
 
-def _size_order(size: str) -> list[int]:
-    return [int(v) for v in size.split("x")]
+def _size_order(size: str) -> tuple:
+    from pirl.evaluate.summary import size_key
+
+    return size_key(size)
 
 
 def physics_gap_table(records: list[dict[str, Any]]) -> str:

@@ -188,7 +188,7 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
         sim_rows,
         key=lambda r: (
             _method_order(r["method"]), r["label"], r.get("act", ""),
-            [int(v) for v in r["size"].split("x")],
+            size_key(r["size"]),
         ),
     )  # fmt: skip
     for r in order:
@@ -272,9 +272,7 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
     labels = {m: honest_label(lab, sources.get(m, ())) for m, lab in labels.items()}
     pirls = sorted({m for m, _, _ in groups if is_advised_key(m)}, key=_method_order)
     others = sorted({m for m, _, _ in groups if not is_advised_key(m)}, key=_method_order)
-    keys = sorted(
-        {(s, z) for _, s, z in groups}, key=lambda k: (k[0], [int(v) for v in k[1].split("x")])
-    )
+    keys = sorted({(s, z) for _, s, z in groups}, key=lambda k: (k[0], size_key(k[1])))
     out = []
     for pirl in pirls:
         for sim, size in keys:
