@@ -42,6 +42,7 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
     }  # fmt: skip
     table = (report.parent / "table.md").read_text()
     assert "Table 1: grid simulator" in table
+    assert "site:campus VCR" in table  # reproduce.sites: every method on the site too
     # Rows carry each run's full label (meta.json's, when the run records one).
     meta = json.loads((out / "runs" / "pirl-oracle-s0" / "meta.json").read_text())
     label = meta.get("label") or "PIRL (oracle advisor, not an LLM)"
