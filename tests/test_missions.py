@@ -177,3 +177,16 @@ def test_mavsdk_imports_the_plan_and_an_autopilot_receives_every_item(tmp_path: 
             )
             assert same(p[6], recv["z"])
         assert all(same(a, b) for a, b in zip(p[:4], recv["params"], strict=True))
+
+
+def test_a_trained_policy_plans_with_its_own_label(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    trained = pirl("train", "--method", "ppo-ewri", "--config", "test", "--steps", "256",
+                   "--out", str(run))  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    out = tmp_path / "m"
+    proc = pirl("plan", "--size", "15", "15", "3", "--policy", str(run), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"].startswith("PPO-EWRI") and "act greedy" in summary["method"]
+    check_plan_against_waypoints(out, "mission")

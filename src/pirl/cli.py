@@ -766,7 +766,13 @@ def plan(
         if act not in ("greedy", "stochastic"):
             raise ConfigError(f"--act {act!r}: allowed values are greedy, stochastic")
         chosen = load_policy(policy, seed=seed, act=act)
-        what = f"{chosen.label if hasattr(chosen, 'label') else policy.name} (act {act})"
+        import json
+
+        from pirl.evaluate.runner import run_label
+
+        meta = policy / "meta.json"
+        name = run_label(json.loads(meta.read_text())) if meta.is_file() else policy.name
+        what = f"{name} (run {policy.name}, act {act})"
     else:
         if method not in ("boustrophedon", "random"):
             raise ConfigError(f"--method {method!r}: allowed values are boustrophedon, random")
