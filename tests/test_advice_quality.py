@@ -18,6 +18,7 @@ from chat_server import ChatServer
 from pirl.advice.oracle import MOVES, OracleAdvisor, degraded, oracle_label
 from pirl.advice.prompt import PromptState, build_prompt, prompt_id
 from pirl.advice.recommendation import Recommendation
+from pirl.advice.student import Student, StudentScore
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 
@@ -280,3 +281,19 @@ def test_the_curve_has_measured_points_a_band_and_a_break_even(tmp_path):
     text = section(points, band, "stochastic")
     assert "break-even at agreement 1.00" in text and "| PPO-EWRI |" in text and "0%" in text
     assert plot(points, band, tmp_path / "a.png", "stochastic").stat().st_size > 1000
+
+
+def test_an_open_gate_closes_only_below_its_hysteresis():
+    student = Student("t", 4)
+    student.score = StudentScore(0.5, 0.4, 60, {}, kappa=0.07)
+    # kappa 0.07: a closed gate at 0.1 stays closed; an open one (closing below 0.05) stays open
+    assert not student.gate_after_fit(False, 0.1, 0.05, "kappa")
+    assert student.gate_after_fit(True, 0.1, 0.05, "kappa")
+    student.score = StudentScore(0.5, 0.4, 60, {}, kappa=0.03)
+    assert not student.gate_after_fit(True, 0.1, 0.05, "kappa")
+    student.score = StudentScore(0.5, 0.4, 60, {}, kappa=0.12)
+    assert student.gate_after_fit(False, 0.1, 0.05, "kappa")
+    student.score = StudentScore(0.5, 0.4, 5, {}, kappa=0.5)  # too few held-out answers
+    assert not student.gate_after_fit(True, 0.1, 0.05, "kappa")
+    cfg = RunConfig().pare
+    assert cfg.gate_close() == pytest.approx(cfg.student_kappa_gate * cfg.student_gate_close)

@@ -450,6 +450,12 @@ class Student:
             per_field, kappa, kappas, tuple(informative),
         )  # fmt: skip
 
+    def gate_after_fit(self, was_open: bool, gate: float, close: float, on: str) -> bool:
+        """Whether the gate is open after a fit, with hysteresis: a closed gate opens when
+        the measure ``on`` reaches ``gate``; an open one stays open while it is at least
+        ``close`` (<= ``gate``)."""
+        return self.passes(close if was_open else gate, on)
+
     def passes(self, gate: float, on: str = "agreement") -> bool:
         """Whether the student may shape rewards: enough held-out answers and, ``on``
         ``"kappa"``, a kappa of at least ``gate`` over informative fields (what the student

@@ -146,6 +146,11 @@ class PareSettings(Settings, section="pare"):
     never pass it). Chosen on distillation states: docs/advice.md."""
     student_kappa_gate: float = 0.1
     """Student mode, ``student_gate_on: kappa``: the kappa that opens the gate."""
+    student_gate_close: float = 0.5
+    """Student mode: once open, the gate closes again only when its measure falls below this
+    share of the threshold that opened it (1 = no hysteresis). A noisy teacher's kappa,
+    measured on a few hundred held-out answers, wanders around the threshold from refit to
+    refit; without hysteresis its shaping switched on and off (docs/advice.md)."""
     student_fit_steps: int = 100
     """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
     student_refit_growth: float = 0.25
@@ -180,6 +185,10 @@ class PareSettings(Settings, section="pare"):
             return self.student_kappa_gate, "kappa"
         return self.student_gate, "agreement"
 
+    def gate_close(self) -> float:
+        """The measure below which an open gate closes again (hysteresis)."""
+        return self.gate()[0] * self.student_gate_close
+
     def validate(self) -> None:
         """Positive intervals and sizes, known mode and prompt, shares in [0, 1]."""
         self.require_positive(
@@ -192,7 +201,7 @@ class PareSettings(Settings, section="pare"):
         self.require_choice("student_dataset_scope", ("shared", "run"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
-            "min_shaped", "student_kappa_gate",
+            "min_shaped", "student_kappa_gate", "student_gate_close",
         ):  # fmt: skip
             if not 0 <= getattr(self, key) <= 1:
                 raise self.refuse(key, "must be in [0, 1]")

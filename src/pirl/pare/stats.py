@@ -57,6 +57,9 @@ class PareStats:
     student_refits: int = 0
     student_refits_deferred: int = 0
     gate_passed_at_step: int = -1
+    gate_closings: int = 0
+    """Student mode: times an open gate closed again (its measure fell below
+    pare.student_gate_close of the threshold)."""
     budget_exhausted: bool = False
     budget_exhausted_at_step: int = -1
     failure_rate: float = 0.0

@@ -56,6 +56,7 @@ class StudentSource:
         dataset: TeacherDataset,
         teacher: TeacherQueue,
         gate: float | tuple[float, str] = 0.8,
+        gate_close: float | None = None,
         refit_every: int = 256,
         fit_steps: int = 100,
         refit_growth: float = 0.0,
@@ -66,6 +67,10 @@ class StudentSource:
         self.student, self.dataset, self.teacher = student, dataset, teacher
         # (threshold, what it applies to): see PareSettings.student_gate_on.
         self.gate = gate if isinstance(gate, tuple) else (float(gate), "agreement")
+        # Hysteresis: once open, the gate closes only below gate_close (PareSettings).
+        self.gate_close = self.gate[0] if gate_close is None else float(gate_close)
+        self.gate_rule = (self.gate[0], self.gate_close, self.gate[1])
+        self.open = student.passes(*self.gate)
         self.refit_every = int(refit_every)
         self.fit_steps, self.refit_growth = int(fit_steps), float(refit_growth)
         self.wait_teacher, self.timeout_s = bool(wait_teacher), float(timeout_s)
@@ -85,7 +90,7 @@ class StudentSource:
         )  # fmt: skip
         return cls(
             setup.board, setup.health, advice.student, advice.dataset, teacher, p.gate(),
-            setup.refit_every, p.student_fit_steps, p.student_refit_growth,
+            p.gate_close(), setup.refit_every, p.student_fit_steps, p.student_refit_growth,
             p.student_wait_teacher, p.timeout_s,
         )  # fmt: skip
 
@@ -119,7 +124,7 @@ class StudentSource:
         sampled = time.perf_counter()
         self.teacher.sample(env, features, worlds)
         asked = time.perf_counter()
-        if self.student.passes(*self.gate):
+        if self.open:
             board.rec[rows] = self.student.predict(features)
             board.meta[rows, HAS] = 1
             board.meta[rows, STEP] = board.t
@@ -138,14 +143,20 @@ class StudentSource:
         st.prompts_sent = teacher.sent
 
     def state_dict(self) -> dict[str, Any]:
-        """The student, the teacher's queue and its batch in flight (asked again on resume)."""
-        return {"student": self.student.state_dict(), "teacher": self.teacher.state_dict()}
+        """The student, whether its gate is open, the teacher's queue and its batch in flight
+        (asked again on resume)."""
+        return {
+            "student": self.student.state_dict(),
+            "teacher": self.teacher.state_dict(),
+            "gate_open": self.open,
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         # What this run stored after the checkpoint is stored again as it replays.
         self.dataset.forget(self.teacher.source, after=self.board.t)
         self.student.load_state_dict(state["student"], self.dataset)
         self.teacher.load_state_dict(state["teacher"])
+        self.open = bool(state.get("gate_open", self.student.passes(*self.gate)))
 
     def close(self) -> None:
         self.teacher.close()
@@ -168,8 +179,7 @@ class StudentSource:
         # once the data has grown by refit_growth since the last fit: as the student
         # converges, refits (the largest cost PIRL adds to PPO) become rarer.
         # Until the gate passes, a refit tries warm and fresh weights (Student.fit_closed).
-        closed = not student.passes(*self.gate)
-        if new > 0 and closed:
+        if new > 0 and not self.open:
             student.fit_closed(self.fit_steps, self.gate[1])
             st.student_refits += 1
         elif new > 0 and new >= self.refit_growth * student.fitted_rows:
@@ -178,6 +188,9 @@ class StudentSource:
         elif new > 0:
             st.student_refits_deferred += 1
         st.refit_s += time.perf_counter() - start
+        was_open = self.open
+        self.open = student.gate_after_fit(was_open, *self.gate_rule)
+        st.gate_closings += int(was_open and not self.open)
         self._update_student_stats()
         self.health.budget_spent_now()  # the student goes on alone
 
@@ -187,7 +200,7 @@ class StudentSource:
         st.student_heldout, st.student_dataset_size = score.heldout, self.student.dataset_size
         st.student_per_field = dict(score.per_field)
         st.student_kappa, st.student_informative = score.kappa, list(score.informative)
-        if st.gate_passed_at_step < 0 and self.student.passes(*self.gate):
+        if st.gate_passed_at_step < 0 and self.open:
             st.gate_passed_at_step = st.steps
 
 
