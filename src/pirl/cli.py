@@ -740,6 +740,10 @@ def plan(
     config: Annotated[
         Path | None, typer.Option(help="A preset whose mission section sets speeds and limits.")
     ] = None,
+    fly: Annotated[
+        str | None,
+        typer.Option(help="physics: then read the written files back and fly them in PyFlyt."),
+    ] = None,
 ) -> None:
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
@@ -747,6 +751,8 @@ def plan(
     from pirl.evaluate.missions import write_mission
 
     check_seed(seed)
+    if fly not in (None, "physics"):
+        raise ConfigError(f"--fly {fly!r}: allowed value is physics")
     if (site is None) == (size is None):
         raise ConfigError("give --site SITE or --size X Y Z (one of them)")
     if (policy is None) == (method is None):
@@ -793,6 +799,43 @@ def plan(
         + ("" if summary["real_place"] else "; NOT a real place (a generated world)")
     )
     console.print(f"wrote {out}: {', '.join(summary['files'])}")
+    if fly:
+        _fly_and_print(out, cfg.physics)
+
+
+def _fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
+    from pirl.evaluate.flyback import fly_mission, read_flight
+
+    files = read_flight(folder)
+    console.print(
+        f"flying {folder} back from {', '.join(files.plans)} ({len(files.ops)} waypoints and "
+        f"camera settings) in PyFlyt{' with wind' if wind else ', no wind'} ..."
+    )
+    f = fly_mission(files, physics, wind)
+    console.print(
+        f"flown: VCR {f['vcr']:.3f} (grid episode {f['vcr_grid']:.3f}), energy "
+        f"{f['energy_used']:.3f} of a battery (grid {f['energy_used_grid']:.3f}), end "
+        f"{f['end']}, {f['steps']} steps ({f['grid_steps']} in the grid), "
+        f"{f['ops_skipped']} waypoints given up, {f['sim_seconds']:.0f} simulated s in "
+        f"{f['wall_seconds']:.0f} s; wrote {folder / 'flown.json'}"
+    )
+
+
+@app.command()
+@_clean_errors
+def fly(
+    mission: Annotated[Path, typer.Argument(help="A folder written by pirl plan.")],
+    config: Annotated[
+        Path | None, typer.Option(help="A preset whose physics section sets wind and the drone.")
+    ] = None,
+    wind: Annotated[bool, typer.Option(help="Fly with the physics section's wind.")] = True,
+) -> None:
+    """Fly a written mission in PyFlyt: its .plan files read back from disk, every sortie in
+    order; flown coverage and energy beside the grid episode's, in flown.json."""
+    from pirl.config.run import RunConfig
+
+    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    _fly_and_print(mission, cfg.physics, wind)
 
 
 site_app = typer.Typer(no_args_is_help=True, help="Bring your own site (docs/sites.md).")

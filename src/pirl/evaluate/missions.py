@@ -55,6 +55,23 @@ def zoom_percent(zoom10: int) -> float:
     return 100.0 * (zoom10 - ZOOM_MIN10) / (ZOOM_MAX10 - ZOOM_MIN10)
 
 
+# The inverses, for a mission read back from its file (``pirl fly``).
+def tilt_from_pitch(pitch: float) -> int:
+    """The tilt (degrees below the horizon) of a gimbal pitch: :func:`gimbal_pitch` undone."""
+    return round(-pitch)
+
+
+def pan_from_yaw(yaw: float) -> int:
+    """The pan (degrees counter-clockwise from east, in [-180, 180)) of an earth-frame yaw:
+    :func:`gimbal_yaw` undone."""
+    return round((90.0 - yaw + 180.0) % 360.0 - 180.0)
+
+
+def zoom10_from_percent(percent: float) -> int:
+    """The zoom in tenths of a ``ZOOM_TYPE_RANGE`` percentage: :func:`zoom_percent` undone."""
+    return round(ZOOM_MIN10 + percent / 100.0 * (ZOOM_MAX10 - ZOOM_MIN10))
+
+
 # -- the episode ------------------------------------------------------------------------------
 @dataclass
 class Step:
@@ -534,6 +551,9 @@ def write_mission(
             "vcr_all": m.get("vcr_all", m["vcr"]),
             "energy_used_grid": round(1.0 - m["battery_left"], 4),
             "grid_steps": m["steps"],
+            # What `pirl fly` needs to fly the files back in the same world.
+            "env": cfg.to_dict(),
+            "mission": settings.to_dict(),
         }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
         os.replace(tmp, out)
@@ -548,8 +568,11 @@ __all__ = [
     "gimbal_pitch",
     "gimbal_yaw",
     "mission_items",
+    "pan_from_yaw",
     "record_episode",
     "sorties",
+    "tilt_from_pitch",
     "write_mission",
+    "zoom10_from_percent",
     "zoom_percent",
 ]
