@@ -207,7 +207,8 @@ class FileFollower:
             moves = [2 * a + (0 if diffs[a] > 0 else 1) for a in order]
             for action in moves:
                 d = D.MOVE_DELTAS[action]
-                if not self.world.blocked[self.index][here[0] + d[0], here[1] + d[1], here[2] + d[2]]:
+                nxt = (here[0] + d[0], here[1] + d[1], here[2] + d[2])
+                if not self.world.blocked[self.index][nxt]:
                     return action
             return moves[0]
         assert op.camera is not None
