@@ -190,3 +190,113 @@ def test_a_trained_policy_plans_with_its_own_label(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"].startswith("PPO-EWRI") and "act greedy" in summary["method"]
     check_plan_against_waypoints(out, "mission")
+
+
+# -- flying the written files back ------------------------------------------------------------
+def test_camera_commands_invert_exactly_over_the_whole_grid() -> None:
+    from pirl.config.grid import pan_steps, tilt_steps, zoom_steps
+    from pirl.evaluate import missions as M
+
+    assert all(M.tilt_from_pitch(M.gimbal_pitch(t)) == t for t in tilt_steps())
+    assert all(M.pan_from_yaw(M.gimbal_yaw(p)) == p for p in pan_steps())
+    assert all(
+        M.zoom10_from_percent(M.zoom_percent(round(z * 10))) == round(z * 10) for z in zoom_steps()
+    )
+
+
+def test_a_mission_flies_back_from_its_files_with_the_grid_episodes_coverage(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "m"
+    proc = pirl("plan", "--method", "boustrophedon", "--size", "10", "10", "3", "--seed", "3",
+                "--out", str(out), "--fly", "physics")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "flown: VCR" in proc.stdout
+    flown = json.loads((out / "flown.json").read_text())
+    for key in ("vcr", "vcr_grid", "energy_used", "energy_used_grid", "end"):
+        assert key in flown
+    assert flown["end"] in ("coverage", "mission_complete")
+    assert abs(flown["vcr"] - flown["vcr_grid"]) <= 0.05
+    assert abs(flown["energy_used"] - flown["energy_used_grid"]) <= 0.25 * flown["energy_used_grid"]
+    assert flown["ops_skipped"] == 0 and flown["wind"]["gust_m_s"] > 0
+
+    # The flight is read from the file, not the episode: a plan cut after its first leg flies
+    # only that leg (fewer steps, less coverage).
+    from pirl.evaluate.flyback import fly_files, read_flight
+
+    plan_file = out / "mission.plan"
+    doc = json.loads(plan_file.read_text())
+    items = doc["mission"]["items"]
+    first_leg = next(k for k, i in enumerate(items) if i["command"] == mav.MAV_CMD_NAV_WAYPOINT)
+    doc["mission"]["items"] = items[: first_leg + 1]
+    plan_file.write_text(json.dumps(doc))
+    cut = fly_files(read_flight(out))
+    assert cut["end"] == "mission_complete" and cut["steps"] < flown["steps"]
+    assert cut["vcr"] < flown["vcr"]
+
+
+def test_sorties_fly_in_order_and_bad_folders_are_one_line(tmp_path: Path) -> None:
+    from pirl.evaluate.flyback import read_flight
+
+    preset = tmp_path / "short.yaml"
+    preset.write_text("mission:\n  battery_s: 60\n  reserve: 0.1\n")
+    one, split = tmp_path / "one", tmp_path / "split"
+    plan(one, "--size", "12", "12", "3", "--seed", "1")
+    plan(split, "--size", "12", "12", "3", "--seed", "1", "--config", str(preset))
+    files, single = read_flight(split), read_flight(one)
+    assert len(files.plans) >= 2 and files.plans[:2] == ["sortie-1.plan", "sortie-2.plan"]
+
+    def stops(ops: list) -> list:
+        out = []
+        for op in ops:
+            if op.kind == "goto" and (not out or out[-1] != op.cell):
+                out.append(op.cell)
+        return out
+
+    # The sorties' waypoints, read back in order, are the single plan's (each later sortie
+    # takes off where the last stopped: a repeat, dropped).
+    assert files.start == single.start and stops(files.ops) == stops(single.ops)
+    one_error_line(pirl("fly", str(tmp_path)), "no summary.json")
+
+
+def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_mission(
+    tmp_path: Path,
+) -> None:
+    import numpy as np
+
+    from pirl.config.run import RunConfig
+    from pirl.evaluate.mission_report import reproduction_missions
+    from test_sites import write_site
+
+    h = np.zeros((10, 12))
+    h[3:6, 4:7] = 12.0  # one building, 2 levels of 10 m
+    site = write_site(tmp_path / "block", h, cell_size_m=10.0, start=[0, 0])
+    runs = []
+    for seed in (0, 1):
+        run = tmp_path / f"ppo-ewri-s{seed}"
+        trained = pirl("train", "--method", "ppo-ewri", "--config", "test", "--steps", "256",
+                       "--seed", str(seed), "--out", str(run))  # fmt: skip
+        assert trained.returncode == 0, trained.stderr
+        runs.append(run)
+    # The evaluation's records name the better run on the site: it is the one flown.
+    records = [
+        {"train_seed": k, "act": "stochastic", "site": "block", "sim": "grid",
+         "source": str(run), "vcr": vcr}
+        for k, (run, vcr) in enumerate(zip(runs, (0.4, 0.6), strict=True))
+    ]  # fmt: skip
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
+    title, markdown, figure = reproduction_missions(
+        cfg, tmp_path / "out", [str(site)], records, log=lambda _m: None
+    )
+    missions = tmp_path / "out" / "missions"
+    assert sorted(p.name for p in missions.iterdir()) == ["block-learned", "block-planner"]
+    learned = json.loads((missions / "block-learned" / "summary.json").read_text())
+    assert "ppo-ewri-s1" in learned["method"]
+    for name in ("block-learned", "block-planner"):
+        flown = json.loads((missions / name / "flown.json").read_text())
+        assert 0 < flown["vcr"] <= 1 and flown["end"]
+        check_plan_against_waypoints(missions / name, "mission")
+    planner = json.loads((missions / "block-planner" / "flown.json").read_text())
+    assert abs(planner["vcr"] - planner["vcr_grid"]) <= 0.05
+    assert "](../missions/block-planner/mission.plan)" in markdown
+    assert "best mean grid VCR on block" in markdown and figure.is_file()

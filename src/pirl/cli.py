@@ -748,48 +748,13 @@ def plan(
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
     from pirl.config.run import RunConfig
-    from pirl.evaluate.missions import write_mission
+    from pirl.evaluate.missions import mission_source, write_mission
 
     check_seed(seed)
     if fly not in (None, "physics"):
         raise ConfigError(f"--fly {fly!r}: allowed value is physics")
-    if (site is None) == (size is None):
-        raise ConfigError("give --site SITE or --size X Y Z (one of them)")
-    if (policy is None) == (method is None):
-        raise ConfigError("give --policy runs/NAME or --method boustrophedon (one of them)")
     cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
-    env = cfg.env
-    if policy is not None:
-        from pirl.agents.loading import load_policy
-
-        run_cfg = policy / "config.yaml"
-        if not (policy / "model.zip").is_file() or not run_cfg.is_file():
-            raise ConfigError(
-                f"--policy {policy}: not a finished run (no model.zip and config.yaml)"
-            )
-        env = RunConfig.from_yaml(run_cfg).env.replace(site="", ground_cells=0, reward="static",
-                                                       llm_weight=False)  # fmt: skip
-        if act not in ("greedy", "stochastic"):
-            raise ConfigError(f"--act {act!r}: allowed values are greedy, stochastic")
-        chosen = load_policy(policy, seed=seed, act=act)
-        import json
-
-        from pirl.evaluate.runner import run_label
-
-        meta = policy / "meta.json"
-        name = run_label(json.loads(meta.read_text())) if meta.is_file() else policy.name
-        what = f"{name} (run {policy.name}, act {act})"
-    else:
-        if method not in ("boustrophedon", "random"):
-            raise ConfigError(f"--method {method!r}: allowed values are boustrophedon, random")
-        chosen = _make_policy(method, seed)
-        what = str(getattr(chosen, "label", method))
-    if site is not None:
-        from pirl.world.seeable import with_site
-
-        env = with_site(env, str(site))
-    else:
-        env = env.replace(size=tuple(size), site="", ground_cells=0)
+    env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
     summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
     console.print(
         f"{what}: VCR {summary['vcr']:.3f} over seeable cells; {summary['sorties']} sortie(s), "

@@ -303,6 +303,10 @@ class ReproduceSettings(Settings, section="reproduce"):
     sites: tuple[str, ...] = ()
     """Site folders (docs/sites.md) every method is also evaluated on, zero-shot, in the grid
     simulator (relative paths: from the working folder, else from the repository)."""
+    missions: bool = False
+    """For each of ``sites``: write the planner's and the best learned policy's missions
+    (``pirl plan``) into ``<out>/missions/``, fly them back from their files in PyFlyt
+    (``pirl fly``) and put both in the report."""
     workers: int = 2
     """Evaluation worker processes."""
     gif_every: int = 2

@@ -224,7 +224,7 @@ def fly_files(
     files: FlightFiles, physics: PhysicsConfig | None = None, wind: bool = True
 ) -> dict[str, Any]:
     """Fly a mission read back by :func:`read_flight` in PyFlyt; the flown figures beside the
-    grid episode's."""
+    grid episode's, and under ``"covered"`` the (X, Y) map of ground cells the flight saw."""
     from pirl.physics.mission import Mission, scenario_for_seed
     from pirl.physics.pyflyt_backend import PyFlytFlight
 
@@ -274,6 +274,7 @@ def fly_files(
         "recoveries": int(m["recoveries"]),
         "wind": {"mean_m_s": list(physics.wind_mean), "gust_m_s": physics.wind_gust},
         "physics": "PyFlyt QuadX (cf2x) at physics.cell_size_m per cell (docs/physics.md)",
+        "covered": mission.world.covered(0).copy(),
     }
 
 
@@ -286,12 +287,16 @@ def fly_mission(
     beside them (atomically)."""
     files = folder if isinstance(folder, FlightFiles) else read_flight(folder)
     flown = fly_files(files, physics, wind)
-    out = files.folder / "flown.json"
-    fd, tmp = tempfile.mkstemp(prefix=".flown.", dir=out.parent)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(json.dumps(flown, indent=1) + "\n")
-    os.replace(tmp, out)
+    figures = {k: v for k, v in flown.items() if k != "covered"}
+    _write(files.folder / "flown.json", json.dumps(figures, indent=1) + "\n")
     return flown
+
+
+def _write(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
 
 
 __all__ = ["FileFollower", "FlightFiles", "Op", "fly_files", "fly_mission", "read_flight"]

@@ -472,6 +472,56 @@ def kml(features: dict, name: str, description: str) -> str:
 
 
 # -- the command ------------------------------------------------------------------------------
+def mission_source(
+    env: VCPPConfig,
+    seed: int,
+    policy: Path | None = None,
+    method: str | None = None,
+    act: str = "greedy",
+    site: Path | str | None = None,
+    size: tuple[int, int, int] | None = None,
+) -> tuple[VCPPConfig, Any, str]:
+    """What a mission is written from: (world, policy, label). ``policy`` a finished run
+    (flown with its own observation and masks) or ``method`` a built-in; ``site`` or ``size``
+    the world (``env`` supplies the rest for a built-in)."""
+    if (site is None) == (size is None):
+        raise ConfigError("give --site SITE or --size X Y Z (one of them)")
+    if (policy is None) == (method is None):
+        raise ConfigError("give --policy runs/NAME or --method boustrophedon (one of them)")
+    from pirl.agents.loading import load_policy
+
+    if policy is not None:
+        from pirl.config.run import RunConfig
+        from pirl.evaluate.runner import run_label
+
+        policy = Path(policy)
+        if not (policy / "model.zip").is_file() or not (policy / "config.yaml").is_file():
+            raise ConfigError(
+                f"--policy {policy}: not a finished run (no model.zip and config.yaml)"
+            )
+        if act not in ("greedy", "stochastic"):
+            raise ConfigError(f"--act {act!r}: allowed values are greedy, stochastic")
+        env = RunConfig.from_yaml(policy / "config.yaml").env.replace(
+            site="", ground_cells=0, reward="static", llm_weight=False
+        )
+        chosen = load_policy(policy, seed=seed, act=act)
+        meta = policy / "meta.json"
+        name = run_label(json.loads(meta.read_text())) if meta.is_file() else policy.name
+        what = f"{name} (run {policy.name}, act {act})"
+    else:
+        if method not in ("boustrophedon", "random"):
+            raise ConfigError(f"--method {method!r}: allowed values are boustrophedon, random")
+        chosen = load_policy(str(method), seed=seed)
+        what = str(getattr(chosen, "label", method))
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        env = with_site(env, str(site))
+    else:
+        env = env.replace(size=tuple(size), site="", ground_cells=0)  # type: ignore[arg-type]
+    return env, chosen, what
+
+
 def write_mission(
     out: Path,
     cfg: VCPPConfig,
@@ -568,6 +618,7 @@ __all__ = [
     "gimbal_pitch",
     "gimbal_yaw",
     "mission_items",
+    "mission_source",
     "pan_from_yaw",
     "record_episode",
     "sorties",

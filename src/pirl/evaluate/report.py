@@ -12,6 +12,7 @@ import csv
 import html
 import json
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -537,7 +538,7 @@ def _md_table_to_html(markdown: str) -> str:
     for line in markdown.splitlines():
         if line.startswith("|") and not line.startswith("|---"):
             cells = [html.escape(c.strip()) for c in line.strip("|").split("|")]
-            cells = [_bold(c) for c in cells]
+            cells = [_links(_bold(c)) for c in cells]
             rows.append(cells)
         elif line.startswith("|---"):
             continue
@@ -551,6 +552,14 @@ def _md_table_to_html(markdown: str) -> str:
                 out.append(f"<p>{html.escape(line)}</p>")
     flush()
     return "\n".join(out)
+
+
+_LINK = re.compile(r"\[([^\]]+)\]\(([^)\s]+)\)")
+
+
+def _links(cell: str) -> str:
+    """Markdown links ``[text](href)`` of an escaped cell as anchors (a run's mission files)."""
+    return _LINK.sub(lambda m: f"<a href='{m.group(2)}'>{m.group(1)}</a>", cell)
 
 
 def _bold(cell: str) -> str:
@@ -571,12 +580,13 @@ def write_report(
     code_version: str = "unknown",
     notes: Sequence[str] = (),
     headline_act: str = "stochastic",
-    extra: tuple[str, Path] | None = None,
+    extras: Sequence[tuple[str, str, Path]] = (),
 ) -> Path:
     """Write table.md, figure.png, intervals.png, learning_curves.png and report.html.
 
-    ``extra``: a further (markdown section, figure) to show after the advice table (the
-    advice-quality curve of ``pirl reproduce --profile study-advice``).
+    ``extras``: further (title, markdown section, figure) to show after the advice table (the
+    advice-quality curve of ``pirl reproduce --profile study-advice``, the missions of
+    ``reproduce.missions``).
 
     table.md and report.html open with a summary generated from the numbers
     (:func:`summary_lines`); report.html shows the interval figures next. table.md then holds,
@@ -602,7 +612,7 @@ def write_report(
             "",
             *blocks,
             advice_table(advisor_stats),
-            extra[0] if extra else "",
+            *(markdown for _, markdown, _ in extras),
             improvement,
             camera,
             physics_gap_table(records),
@@ -635,9 +645,10 @@ def write_report(
             f"<h2>Aggregate intervals over seeds (grid, act {act})</h2>"
             f"<img alt='intervals {act}' src='{_data_uri(path)}'>"
         )
-    if extra:
+    for title, _, figure in extras:
         sections.append(
-            f"<h2>PIRL by advice quality</h2><img alt='advice quality' src='{_data_uri(extra[1])}'>"
+            f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' "
+            f"src='{_data_uri(figure)}'>"
         )
     sections += [
         f"<p>Code version: <code>{html.escape(code_version)}</code></p>",

@@ -564,7 +564,18 @@ def reproduce(
         "Advisors other than an LLM (the oracle) and planners are labelled as such.",
         settings_line(cfg),
     ]
-    curve = advice_quality(cfg, out, advisor, runs, stats, log) if rp.score_states else None
+    extras = []
+    if rp.score_states:
+        extras.append(
+            ("PIRL by advice quality", *advice_quality(cfg, out, advisor, runs, stats, log))
+        )
+    if rp.missions:
+        from pirl.evaluate.mission_report import reproduction_missions
+
+        records = [json.loads(line) for line in (out / "eval" / "episodes.jsonl").open()]
+        missions = reproduction_missions(cfg, out, plan.sites, records, log)
+        if missions is not None:
+            extras.append(missions)
     return write_report(
         out / "report",
         summary,
@@ -574,7 +585,7 @@ def reproduce(
         code_version=git_commit(),
         notes=notes,
         headline_act=rp.headline_act,
-        extra=curve,
+        extras=extras,
     )
 
 

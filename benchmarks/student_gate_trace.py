@@ -1,0 +1,121 @@
+"""When does the student's gate open, and does it stay open? The gate's rule chosen on
+validation states, without training PPO.
+
+For each teacher (the oracle at several accuracies) it asks about distillation states
+(planner and random rollouts on scenario seeds from 2,000,000 + 100,000 * seed: neither
+training's nor evaluation's), then replays a PIRL run's student schedule on them: at each of
+the run's rollout boundaries the answers of one rollout arrive (``--rate`` answers per step,
+``--rollout`` steps per rollout), the student is refit as PIRL refits it
+(:class:`pirl.pare.sources.student.StudentSource`: warm and fresh while the gate is closed,
+warm once the answers grew by ``pare.student_refit_growth`` while it is open) and each
+candidate gate rule decides whether the next rollout is shaped. It prints, per teacher and
+rule, the share of the run's steps the gate had open, when it first opened and how often it
+closed again. Every rule replays on the same answers.
+
+    .venv/bin/python benchmarks/student_gate_trace.py [--seeds 7 8] [--accuracies 1,0.75,0.5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+
+import numpy as np
+
+RULES = {
+    # name: (opens at kappa >=, closes below, fewest held-out answers)
+    "kappa 0.10, no hysteresis": (0.10, 0.10, 20),
+    "kappa 0.10, closes below 0.05": (0.10, 0.05, 20),
+    "kappa 0.05, closes below 0.025": (0.05, 0.025, 20),
+}
+
+
+def replay(
+    x: np.ndarray, y: np.ndarray, rule: tuple[float, float, int], args: argparse.Namespace
+) -> tuple[float, int, int]:
+    """(share of steps open, first step open or -1, closings) of one rule on one stream."""
+    from pirl.advice.student import Student
+
+    gate, close, min_held = rule
+    student = Student("trace", x.shape[1], hidden=args.hidden, seed=0)
+    per = max(1, round(args.rate * args.rollout))
+    boundaries = args.steps // args.rollout
+    is_open, open_rollouts, first, closings = False, 0, -1, 0
+    for b in range(boundaries):
+        lo, hi = b * per, min((b + 1) * per, len(x))
+        if hi > lo:
+            student.add(np.arange(lo + 1, hi + 1), x[lo:hi], y[lo:hi])
+        new = student.dataset_size - student.fitted_rows
+        if new > 0 and not is_open:
+            student.fit_closed(args.fit_steps, "kappa")
+        elif new > 0 and new >= args.growth * student.fitted_rows:
+            student.fit(args.fit_steps)
+        enough = student.score.heldout >= min_held
+        was = is_open
+        is_open = enough and student.score.kappa >= (close if was else gate)
+        closings += int(was and not is_open)
+        if is_open and first < 0:
+            first = (b + 1) * args.rollout
+        open_rollouts += int(is_open)
+    return open_rollouts / boundaries, first, closings
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--accuracies", default="1.0,0.75,0.5,0.25,0.0")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8])
+    parser.add_argument("--config", default="study-advice")
+    parser.add_argument("--steps", type=int, default=262_144, help="the run's PPO steps")
+    parser.add_argument("--rollout", type=int, default=4096, help="steps per rollout")
+    parser.add_argument("--rate", type=float, default=0.02, help="teacher answers per step")
+    parser.add_argument("--fit-steps", type=int, default=100)
+    parser.add_argument("--growth", type=float, default=0.25)
+    parser.add_argument("--hidden", type=int, default=128)
+    args = parser.parse_args()
+    os.environ.setdefault("PIRL_CACHE_DIR", tempfile.mkdtemp(prefix="pirl-gate-trace-"))
+
+    import torch
+
+    torch.set_num_threads(1)
+    from pirl.advice.oracle import OracleAdvisor
+    from pirl.advice.student import encode
+    from pirl.agents.distill import collect_states
+    from pirl.cli import _preset
+    from pirl.config.run import RunConfig
+
+    cfg = RunConfig.from_yaml(_preset(args.config, "--config"))
+    need = int(args.rate * args.steps) + 1
+    print(f"{need} answers per stream ({args.steps:,} steps at {args.rate} answers per step), "
+          f"refit every {args.rollout} steps with {args.fit_steps} Adam steps")  # fmt: skip
+    results: dict[tuple[float, str], list[tuple[float, int, int]]] = {}
+    for seed in args.seeds:
+        for acc in (float(a) for a in args.accuracies.split(",")):
+            began = time.perf_counter()
+            advisor = OracleAdvisor(acc)
+            prompts, views, x = collect_states(
+                cfg, advisor, ("boustrophedon", "random"), need, seed=seed
+            )
+            answers = advisor.advise(prompts, views)
+            keep = [i for i, a in enumerate(answers) if a.recommendation is not None]
+            y = encode([answers[i].recommendation for i in keep])
+            x = x[keep]
+            # A run's answers come from its own rollouts in time order; shuffle so that one
+            # boundary's answers are not all from one episode.
+            order = np.random.default_rng(seed).permutation(len(x))
+            x, y = x[order], y[order]
+            for name, rule in RULES.items():
+                results.setdefault((acc, name), []).append(replay(x, y, rule, args))
+            print(f"seed {seed}, accuracy {acc:g}: {time.perf_counter() - began:.0f} s", flush=True)
+    print("\n| teacher | rule | open share per seed | first open (step) | closings |")
+    print("|---|---|---|---|---|")
+    for (acc, name), rows in results.items():
+        shares = " / ".join(f"{r[0]:.0%}" for r in rows)
+        firsts = " / ".join(f"{r[1]:,}" if r[1] >= 0 else "never" for r in rows)
+        closings = " / ".join(str(r[2]) for r in rows)
+        print(f"| oracle, accuracy {acc:g} | {name} | {shares} | {firsts} | {closings} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,166 @@
+"""The missions of a reproduction (``reproduce.missions``): for each evaluation site, the
+planner's mission and the best learned policy's, written by ``pirl plan``'s writer into
+``<out>/missions/<site>-<planner|learned>/``, flown back from their files in PyFlyt
+(``pirl fly``), and the report's table and figure of them.
+
+"Best learned policy": the trained run with the highest mean VCR on that site in the grid
+evaluation (headline act mode), acting greedy as ``pirl plan`` does: a choice for display,
+named as such in the table, not a result.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pirl.config.run import RunConfig
+
+SCENARIO_SEED = 0
+"""The scenario (the site's start draw) every reproduction mission is written from."""
+
+
+def best_run(records: list[dict[str, Any]], site: str, act: str) -> tuple[Path, float] | None:
+    """The trained run with the highest mean grid VCR on ``site`` acting ``act``, and that
+    mean; None when no trained run was evaluated there."""
+    by_run: dict[str, list[float]] = defaultdict(list)
+    for r in records:
+        trained = r.get("train_seed") is not None and r.get("act") == act
+        if trained and r.get("site") == site and r.get("sim") == "grid":
+            by_run[str(r["source"])].append(float(r["vcr"]))
+    if not by_run:
+        return None
+    source = max(sorted(by_run), key=lambda s: np.mean(by_run[s]))
+    return Path(source), float(np.mean(by_run[source]))
+
+
+def _mission(
+    cfg: RunConfig,
+    folder: Path,
+    site: str,
+    log: Callable[[str], Any],
+    policy: Path | None = None,
+    method: str | None = None,
+) -> dict[str, Any]:
+    """Write (unless already written and flown) and fly one mission; its summary and flight."""
+    from pirl.evaluate.flyback import fly_mission
+    from pirl.evaluate.missions import mission_source, write_mission
+
+    done = folder / "flown.json"
+    if (folder / "summary.json").is_file() and done.is_file():
+        summary = json.loads((folder / "summary.json").read_text())
+    else:
+        shutil.rmtree(folder, ignore_errors=True)  # a half-made one from an interrupted run
+        env, chosen, what = mission_source(cfg.env, SCENARIO_SEED, policy, method, "greedy", site)
+        summary = write_mission(folder, env, cfg.mission, chosen, SCENARIO_SEED, what)
+    log(f"missions: flying {folder.name} back from its files in PyFlyt")
+    flown = fly_mission(folder, cfg.physics)
+    return {"folder": folder, "summary": summary, "flown": flown}
+
+
+def reproduction_missions(
+    cfg: RunConfig,
+    out: Path,
+    sites: list[str],
+    records: list[dict[str, Any]],
+    log: Callable[[str], Any] = print,
+) -> tuple[str, str, Path] | None:
+    """Write and fly the planner's and the best learned policy's mission on every site; the
+    report's (title, markdown section, figure)."""
+    if not sites:
+        return None
+    act = cfg.reproduce.headline_act
+    rows = []
+    for site in sites:
+        name = Path(site).name
+        entries = [
+            _mission(cfg, out / "missions" / f"{name}-planner", site, log, method="boustrophedon")
+        ]
+        best = best_run(records, name, act)
+        if best is not None:
+            folder = out / "missions" / f"{name}-learned"
+            entry = _mission(cfg, folder, site, log, policy=best[0])
+            entry["chosen"] = f"best mean grid VCR on {name} acting {act}: {best[1]:.3f}"
+            entries.append(entry)
+        rows.append((name, site, entries))
+    return "Missions", section(rows, out / "report"), figure(rows, out / "report" / "missions.png")
+
+
+def section(rows: list[tuple[str, str, list[dict[str, Any]]]], report: Path) -> str:
+    """The markdown table: written mission figures, flown figures, links to the files."""
+    lines = [
+        "## Missions: written, then flown back from the files",
+        "",
+        f"Each mission is one episode of scenario {SCENARIO_SEED} (wind off) written by "
+        "`pirl plan`, then read back from its .plan files and flown in PyFlyt with the physics "
+        "section's wind (`pirl fly`). Learned: the trained run named, acting greedy.",
+        "",
+        "| site | mission | items (before merging) | sorties | distance m | flight min | photos "
+        "| VCR grid | VCR flown | energy flown / grid | end | files |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, _site, entries in rows:
+        for e in entries:
+            s, f = e["summary"], e["flown"]
+            rel = Path("..") / e["folder"].relative_to(report.parent)
+            plans = " ".join(f"[{p}]({(rel / p).as_posix()})" for p in f["plans"])
+            links = f"{plans} [path.kml]({(rel / 'path.kml').as_posix()})"
+            chosen = f" ({e['chosen']})" if "chosen" in e else ""
+            lines.append(
+                f"| {name} | {s['method']}{chosen} | {s['items_after_merging']} "
+                f"({s['items_before_merging']}) | {s['sorties']} | {s['distance_m']:,.0f} | "
+                f"{s['flight_time_s'] / 60:.1f} | {s['photos']} | {s['vcr']:.3f} | "
+                f"{f['vcr']:.3f} | {f['energy_used']:.3f} / {f['energy_used_grid']:.3f} | "
+                f"{f['end']} | {links} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Path:
+    """Per site and mission: the map (buildings by height), the ground cells the flight saw
+    and the written waypoints' line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pirl.evaluate.flyback import read_flight
+    from pirl.world.site import load_site
+
+    n = sum(len(e) for _, _, e in rows)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False)
+    k = 0
+    for name, site_path, entries in rows:
+        site = load_site(site_path)
+        for e in entries:
+            ax = axes[0, k]
+            k += 1
+            ax.imshow(site.heights.T, origin="lower", cmap="Greys", interpolation="nearest")
+            seen = np.ma.masked_where(~e["flown"]["covered"].T, e["flown"]["covered"].T)
+            ax.imshow(seen, origin="lower", cmap="summer", alpha=0.45, interpolation="nearest")
+            cells = [op.cell for op in read_flight(e["folder"]).ops if op.kind == "goto"]
+            xy = np.array([(c[0], c[1]) for c in cells if c is not None])
+            if len(xy):
+                ax.plot(xy[:, 0], xy[:, 1], color="tab:red", lw=0.8)
+            method = e["summary"]["method"]
+            ax.set_title(
+                f"{name}: {method[:38]}\nflown VCR {e['flown']['vcr']:.3f} "
+                f"(grid {e['summary']['vcr']:.3f})",
+                fontsize=8,
+            )
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.suptitle("Missions flown from their files (green: ground seen in flight; red: waypoints)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["best_run", "figure", "reproduction_missions", "section"]
