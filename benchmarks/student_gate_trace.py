@@ -24,29 +24,58 @@ import time
 
 import numpy as np
 
+MOVE_FIELDS = ("dx", "dy", "dz")
+
+
+def mean_kappa(score) -> float:  # noqa: ANN001 - a StudentScore
+    """The gate's measure: mean kappa over the informative fields."""
+    return score.kappa
+
+
+def move_kappa(score) -> float:  # noqa: ANN001
+    """Mean kappa over the informative move fields (the camera's noise left out)."""
+    ks = [score.per_field_kappa[f] for f in score.informative if f in MOVE_FIELDS]
+    return float(np.mean(ks)) if ks else 0.0
+
+
+def best_kappa(score) -> float:  # noqa: ANN001
+    """The highest kappa of any informative field."""
+    return max((score.per_field_kappa[f] for f in score.informative), default=0.0)
+
+
 RULES = {
-    # name: (opens at kappa >=, closes below, fewest held-out answers)
-    "kappa 0.10, no hysteresis": (0.10, 0.10, 20),
-    "kappa 0.10, closes below 0.05": (0.10, 0.05, 20),
-    "kappa 0.05, closes below 0.025": (0.05, 0.025, 20),
+    # name: (measure, opens at >=, closes below, fewest held-out answers)
+    "kappa 0.10, no hysteresis": (mean_kappa, 0.10, 0.10, 20),
+    "kappa 0.10, closes below 0.05": (mean_kappa, 0.10, 0.05, 20),
+    "kappa 0.05, closes below 0.025": (mean_kappa, 0.05, 0.025, 20),
+    "move kappa 0.10, closes below 0.05": (move_kappa, 0.10, 0.05, 20),
+    "best field kappa 0.10, closes below 0.05": (best_kappa, 0.10, 0.05, 20),
 }
 
 
 def replay(
-    x: np.ndarray, y: np.ndarray, rule: tuple[float, float, int], args: argparse.Namespace
+    x: np.ndarray,
+    y: np.ndarray,
+    rule: tuple,
+    args: argparse.Namespace,
+    arrive: np.ndarray | None = None,
 ) -> tuple[float, int, int]:
-    """(share of steps open, first step open or -1, closings) of one rule on one stream."""
+    """(share of steps open, first step open or -1, closings) of one rule on one stream.
+    ``arrive``: the boundary at which each row arrives (a recorded run's); else an even
+    ``--rate``."""
     from pirl.advice.student import Student
 
-    gate, close, min_held = rule
+    measure, gate, close, min_held = rule
     student = Student("trace", x.shape[1], hidden=args.hidden, seed=0)
     per = max(1, round(args.rate * args.rollout))
     boundaries = args.steps // args.rollout
+    if arrive is None:
+        arrive = np.arange(len(x)) // per
     is_open, open_rollouts, first, closings = False, 0, -1, 0
     for b in range(boundaries):
-        lo, hi = b * per, min((b + 1) * per, len(x))
-        if hi > lo:
-            student.add(np.arange(lo + 1, hi + 1), x[lo:hi], y[lo:hi])
+        rows = np.flatnonzero(arrive == b)
+        if len(rows):
+            student.add(rows + 1, x[rows], y[rows])
         new = student.dataset_size - student.fitted_rows
         if new > 0 and not is_open:
             student.fit_closed(args.fit_steps, "kappa")
@@ -54,7 +83,7 @@ def replay(
             student.fit(args.fit_steps)
         enough = student.score.heldout >= min_held
         was = is_open
-        is_open = enough and student.score.kappa >= (close if was else gate)
+        is_open = enough and measure(student.score) >= (close if was else gate)
         closings += int(was and not is_open)
         if is_open and first < 0:
             first = (b + 1) * args.rollout
@@ -73,7 +102,16 @@ def main() -> None:
     parser.add_argument("--fit-steps", type=int, default=100)
     parser.add_argument("--growth", type=float, default=0.25)
     parser.add_argument("--hidden", type=int, default=128)
+    parser.add_argument(
+        "--dataset",
+        default="",
+        help="replay the answers recorded by the runs of a study instead (its student.sqlite; "
+        "runs with student_dataset_scope: run), in the order and at the steps they arrived",
+    )
     args = parser.parse_args()
+    if args.dataset:
+        replay_dataset(args)
+        return
     os.environ.setdefault("PIRL_CACHE_DIR", tempfile.mkdtemp(prefix="pirl-gate-trace-"))
 
     import torch
@@ -115,6 +153,38 @@ def main() -> None:
         firsts = " / ".join(f"{r[1]:,}" if r[1] >= 0 else "never" for r in rows)
         closings = " / ".join(str(r[2]) for r in rows)
         print(f"| oracle, accuracy {acc:g} | {name} | {shares} | {firsts} | {closings} |")
+
+
+def replay_dataset(args: argparse.Namespace) -> None:
+    """Each recorded run's answers, replayed under every rule."""
+    import json
+    import re
+    import sqlite3
+
+    db = sqlite3.connect(f"file:{args.dataset}?mode=ro", uri=True)
+    sources = [r[0] for r in db.execute("SELECT DISTINCT source FROM samples")]
+    results: dict[tuple[str, str], list[tuple[float, int, int]]] = {}
+    per_boundary = args.rollout // 16  # the board counts vector steps (16 worlds)
+    for source in sorted(sources):
+        found = re.search(r"accuracy([0-9.]+)-.*-s(\d+)$", source)
+        if not found:
+            continue
+        rows = db.execute(
+            "SELECT features, labels, t FROM samples WHERE source = ? ORDER BY id", (source,)
+        ).fetchall()
+        x = np.stack([np.frombuffer(r[0], dtype=np.float32) for r in rows])
+        y = np.array([json.loads(r[1]) for r in rows], dtype=np.int64)
+        arrive = np.array([(r[2] - 1) // per_boundary for r in rows])
+        for name, rule in RULES.items():
+            results.setdefault((found.group(1), name), []).append(replay(x, y, rule, args, arrive))
+        print(f"replayed {source}", flush=True)
+    print("\n| teacher | rule | open share per seed | first open (step) | closings |")
+    print("|---|---|---|---|---|")
+    for (acc, name), rs in sorted(results.items(), key=lambda kv: -float(kv[0][0])):
+        shares = " / ".join(f"{r[0]:.0%}" for r in rs)
+        firsts = " / ".join(f"{r[1]:,}" if r[1] >= 0 else "never" for r in rs)
+        print(f"| oracle, accuracy {acc} | {name} | {shares} | {firsts} | "
+              f"{' / '.join(str(r[2]) for r in rs)} |")  # fmt: skip
 
 
 if __name__ == "__main__":
