@@ -108,7 +108,14 @@ def main() -> None:
         help="replay the answers recorded by the runs of a study instead (its student.sqlite; "
         "runs with student_dataset_scope: run), in the order and at the steps they arrived",
     )
+    parser.add_argument("--rules", default="", help="comma-separated rule numbers (1-based)")
     args = parser.parse_args()
+    args.replay_accuracies = {float(a) for a in args.accuracies.split(",")}
+    if args.rules:
+        keep = {int(k) - 1 for k in args.rules.split(",")}
+        for k, name in enumerate(list(RULES)):
+            if k not in keep:
+                del RULES[name]
     if args.dataset:
         replay_dataset(args)
         return
@@ -167,7 +174,7 @@ def replay_dataset(args: argparse.Namespace) -> None:
     per_boundary = args.rollout // 16  # the board counts vector steps (16 worlds)
     for source in sorted(sources):
         found = re.search(r"accuracy([0-9.]+)-.*-s(\d+)$", source)
-        if not found:
+        if not found or float(found.group(1)) not in args.replay_accuracies:
             continue
         rows = db.execute(
             "SELECT features, labels, t FROM samples WHERE source = ? ORDER BY id", (source,)

@@ -419,6 +419,16 @@ def describe_plan(
     eval_s += physics_eps * r["physics_s_per_episode"]
     eval_min = eval_s / max(1, eval_workers) / 60
     total_eval = learned * rp.episodes * len(sizes)
+    mission_lines, mission_min = [], 0.0
+    if rp.missions and profile_sites(cfg):
+        # Two flights a site, each about a physics episode per 30x30 cells, one process.
+        areas = [load_site(f).size[0] * load_site(f).size[1] for f in profile_sites(cfg)]
+        mission_min = sum(2 * r["physics_s_per_episode"] * a / 900 for a in areas) / 60
+        names = ", ".join(Path(f).name for f in profile_sites(cfg))
+        mission_lines.append(
+            f"plan: missions on {names}: the planner's and the best learned policy's, written "
+            f"and flown back from their files in PyFlyt: about {mission_min:.0f} min"
+        )
     return [
         *phase_lines,
         f"plan: {len(jobs)} training runs ({len(todo)} to train) of {steps_text(cfg)}, "
@@ -428,7 +438,9 @@ def describe_plan(
         f"({rp.episodes} scenarios x {len(sizes)} sizes and sites x {len(rp.acts)} act modes x "
         f"{len(jobs)} runs), the built-ins and {physics_eps} physics episodes in "
         f"{eval_workers} processes: about {eval_min:.0f} min",
-        f"plan: about {(train_min + eval_min) / 60:.1f} h in all (rates measured on a 2-core "
+        *mission_lines,
+        f"plan: about {(train_min + eval_min + mission_min) / 60:.1f} h in all (rates measured "
+        "on a 2-core "
         "machine; scale by your cores)",
     ]
 
