@@ -24,32 +24,13 @@ import time
 
 import numpy as np
 
-MOVE_FIELDS = ("dx", "dy", "dz")
-
-
-def mean_kappa(score) -> float:  # noqa: ANN001 - a StudentScore
-    """The gate's measure: mean kappa over the informative fields."""
-    return score.kappa
-
-
-def move_kappa(score) -> float:  # noqa: ANN001
-    """Mean kappa over the informative move fields (the camera's noise left out)."""
-    ks = [score.per_field_kappa[f] for f in score.informative if f in MOVE_FIELDS]
-    return float(np.mean(ks)) if ks else 0.0
-
-
-def best_kappa(score) -> float:  # noqa: ANN001
-    """The highest kappa of any informative field."""
-    return max((score.per_field_kappa[f] for f in score.informative), default=0.0)
-
-
 RULES = {
-    # name: (measure, opens at >=, closes below, fewest held-out answers)
-    "kappa 0.10, no hysteresis": (mean_kappa, 0.10, 0.10, 20),
-    "kappa 0.10, closes below 0.05": (mean_kappa, 0.10, 0.05, 20),
-    "kappa 0.05, closes below 0.025": (mean_kappa, 0.05, 0.025, 20),
-    "move kappa 0.10, closes below 0.05": (move_kappa, 0.10, 0.05, 20),
-    "best field kappa 0.10, closes below 0.05": (best_kappa, 0.10, 0.05, 20),
+    # name: (pare.student_gate_on, opens at >=, closes below, fewest held-out answers)
+    "kappa 0.10, no hysteresis": ("kappa", 0.10, 0.10, 20),
+    "kappa 0.10, closes below 0.05": ("kappa", 0.10, 0.05, 20),
+    "kappa 0.05, closes below 0.025": ("kappa", 0.05, 0.025, 20),
+    "move kappa 0.10, closes below 0.05": ("move_kappa", 0.10, 0.05, 20),
+    "best field kappa 0.10, closes below 0.05": ("best_kappa", 0.10, 0.05, 20),
 }
 
 
@@ -63,9 +44,9 @@ def replay(
     """(share of steps open, first step open or -1, closings) of one rule on one stream.
     ``arrive``: the boundary at which each row arrives (a recorded run's); else an even
     ``--rate``."""
-    from pirl.advice.student import Student
+    from pirl.advice.student import Student, gate_value
 
-    measure, gate, close, min_held = rule
+    on, gate, close, min_held = rule
     student = Student("trace", x.shape[1], hidden=args.hidden, seed=0)
     per = max(1, round(args.rate * args.rollout))
     boundaries = args.steps // args.rollout
@@ -83,7 +64,7 @@ def replay(
             student.fit(args.fit_steps)
         enough = student.score.heldout >= min_held
         was = is_open
-        is_open = enough and measure(student.score) >= (close if was else gate)
+        is_open = enough and gate_value(student.score, on) >= (close if was else gate)
         closings += int(was and not is_open)
         if is_open and first < 0:
             first = (b + 1) * args.rollout
@@ -108,6 +89,7 @@ def main() -> None:
         help="replay the answers recorded by the runs of a study instead (its student.sqlite; "
         "runs with student_dataset_scope: run), in the order and at the steps they arrived",
     )
+    parser.add_argument("--replay-seeds", type=int, nargs="*", default=[])
     parser.add_argument("--rules", default="", help="comma-separated rule numbers (1-based)")
     args = parser.parse_args()
     args.replay_accuracies = {float(a) for a in args.accuracies.split(",")}
@@ -116,6 +98,9 @@ def main() -> None:
         for k, name in enumerate(list(RULES)):
             if k not in keep:
                 del RULES[name]
+    import torch
+
+    torch.set_num_threads(1)
     if args.dataset:
         replay_dataset(args)
         return
@@ -175,6 +160,8 @@ def replay_dataset(args: argparse.Namespace) -> None:
     for source in sorted(sources):
         found = re.search(r"accuracy([0-9.]+)-.*-s(\d+)$", source)
         if not found or float(found.group(1)) not in args.replay_accuracies:
+            continue
+        if args.replay_seeds and int(found.group(2)) not in args.replay_seeds:
             continue
         rows = db.execute(
             "SELECT features, labels, t FROM samples WHERE source = ? ORDER BY id", (source,)

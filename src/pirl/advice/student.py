@@ -302,8 +302,19 @@ class StudentScore:
     student learned carries no state information."""
 
 
-def _gate_value(score: StudentScore, on: str) -> float:
-    return score.kappa if on == "kappa" else score.agreement
+MOVE_FIELDS = ("dx", "dy", "dz")
+
+
+def gate_value(score: StudentScore, on: str) -> float:
+    """The gate's measure ``on`` of a score (``pare.student_gate_on``)."""
+    if on == "kappa":
+        return score.kappa
+    if on == "move_kappa":  # the move fields only: the camera fields' noise left out
+        ks = [score.per_field_kappa[f] for f in score.informative if f in MOVE_FIELDS]
+        return float(np.mean(ks)) if ks else 0.0
+    if on == "best_kappa":  # the field the student learned best
+        return max((score.per_field_kappa[f] for f in score.informative), default=0.0)
+    return score.agreement
 
 
 class Student:
@@ -416,7 +427,7 @@ class Student:
         warm = self.fit(steps)
         kept = copy.deepcopy(self.net.state_dict()), copy.deepcopy(self.opt.state_dict())
         fresh = self.fit(steps, fresh=True)
-        if _gate_value(warm, on) >= _gate_value(fresh, on):
+        if gate_value(warm, on) >= gate_value(fresh, on):
             self.net.load_state_dict(kept[0])
             self.opt.load_state_dict(kept[1])
             self.score = warm
@@ -463,7 +474,7 @@ class Student:
         least ``gate`` (which a noisy teacher cannot reach and a constant one passes)."""
         if self.score.heldout < MIN_HELDOUT:
             return False
-        return _gate_value(self.score, on) >= gate
+        return gate_value(self.score, on) >= gate
 
     # -- advice -----------------------------------------------------------------------------
     @torch.no_grad()

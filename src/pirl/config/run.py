@@ -142,8 +142,10 @@ class PareSettings(Settings, section="pare"):
     """Student mode: what opens the gate. 'kappa': the student's Cohen's kappa against the
     teacher over the fields the teacher varies reaches student_kappa_gate (what the student
     learned of the teacher's signal, so an imperfect teacher passes and a near-constant one
-    does not); 'agreement': raw held-out agreement reaches student_gate (a noisy teacher can
-    never pass it). Chosen on distillation states: docs/advice.md."""
+    does not); 'move_kappa': the same over the move fields (dx, dy, dz) only; 'best_kappa':
+    the highest kappa of any informative field; 'agreement': raw held-out agreement reaches
+    student_gate (a noisy teacher can never pass it). Chosen on distillation states and on a
+    study's recorded answers: docs/advice.md."""
     student_kappa_gate: float = 0.1
     """Student mode, ``student_gate_on: kappa``: the kappa that opens the gate."""
     student_gate_close: float = 0.5
@@ -181,9 +183,9 @@ class PareSettings(Settings, section="pare"):
 
     def gate(self) -> tuple[float, str]:
         """The student's gate: (threshold, ``"kappa"`` or ``"agreement"``)."""
-        if self.student_gate_on == "kappa":
-            return self.student_kappa_gate, "kappa"
-        return self.student_gate, "agreement"
+        if self.student_gate_on == "agreement":
+            return self.student_gate, "agreement"
+        return self.student_kappa_gate, self.student_gate_on
 
     def gate_close(self) -> float:
         """The measure below which an open gate closes again (hysteresis)."""
@@ -197,7 +199,7 @@ class PareSettings(Settings, section="pare"):
         self.require_choice("mode", ("student", "sync", "async"))
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
             self.require_choice("prompt_variant", ("paper", "compact"))
-        self.require_choice("student_gate_on", ("kappa", "agreement"))
+        self.require_choice("student_gate_on", ("kappa", "move_kappa", "best_kappa", "agreement"))
         self.require_choice("student_dataset_scope", ("shared", "run"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
