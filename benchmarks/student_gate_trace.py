@@ -31,6 +31,8 @@ RULES = {
     "kappa 0.05, closes below 0.025": ("kappa", 0.05, 0.025, 20),
     "move kappa 0.10, closes below 0.05": ("move_kappa", 0.10, 0.05, 20),
     "best field kappa 0.10, closes below 0.05": ("best_kappa", 0.10, 0.05, 20),
+    "best field kappa 0.15, closes below 0.075": ("best_kappa", 0.15, 0.075, 20),
+    "best field kappa 0.20, closes below 0.10": ("best_kappa", 0.20, 0.10, 20),
 }
 
 
