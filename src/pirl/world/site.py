@@ -56,9 +56,7 @@ class GeoRef:
 
     def cells_from_lonlat(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Grid coordinates (cell units, cell (x, y) spans [x, x+1)) of WGS84 points."""
-        from pyproj import Transformer
-
-        to = Transformer.from_crs("EPSG:4326", self.crs, always_xy=True)
+        to = _transformer("EPSG:4326", self.crs)
         # Lists, not arrays: pyproj reads a one-element array as a scalar point (and warns).
         e, n = to.transform(np.asarray(lon, float).tolist(), np.asarray(lat, float).tolist())
         return (np.asarray(e) - self.west) / self.cell_size_m, (
@@ -67,13 +65,20 @@ class GeoRef:
 
     def lonlat_from_cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """WGS84 (lon, lat) of grid coordinates (cell centres are at x + 0.5, y + 0.5)."""
-        from pyproj import Transformer
-
-        to = Transformer.from_crs(self.crs, "EPSG:4326", always_xy=True)
+        to = _transformer(self.crs, "EPSG:4326")
         e = self.west + np.asarray(x, dtype=float) * self.cell_size_m
         n = self.south + np.asarray(y, dtype=float) * self.cell_size_m
         lon, lat = to.transform(np.atleast_1d(e).tolist(), np.atleast_1d(n).tolist())
         return np.asarray(lon), np.asarray(lat)
+
+
+@functools.lru_cache(maxsize=16)
+def _transformer(src: str, dst: str) -> Any:
+    """One pyproj transformer per pair of CRSs: building one takes milliseconds, and a
+    mission converts every waypoint."""
+    from pyproj import Transformer
+
+    return Transformer.from_crs(src, dst, always_xy=True)
 
 
 @dataclass(frozen=True, eq=False)
