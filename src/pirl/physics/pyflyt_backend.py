@@ -17,6 +17,7 @@ grow into different trajectories.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import functools
 import io
 import os
@@ -44,23 +45,33 @@ _GRAVITY = 9.81
 
 @contextlib.contextmanager
 def _quiet() -> Iterator[None]:
-    """Silence stdout, C level included (pybullet and PyFlyt print banners and escapes)."""
+    """Silence stdout and stderr, C level included (pybullet prints its build banner on
+    stderr, PyFlyt banners and escapes on stdout). Exceptions still propagate."""
     sys.stdout.flush()
+    sys.stderr.flush()
     try:
-        saved = os.dup(1)
+        saved = (os.dup(1), os.dup(2))
     except OSError:  # no real stdout: nothing to silence at the C level
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             yield
         return
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
+    os.dup2(devnull, 2)
     try:
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             yield
     finally:
         sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
+        sys.stderr.flush()
+        # C's stdio buffers a pipe's output: flush what the libraries printed into /dev/null
+        # before the streams are given back, or it comes out later.
+        with contextlib.suppress(Exception):
+            ctypes.CDLL(None).fflush(None)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        os.close(saved[0])
+        os.close(saved[1])
         os.close(devnull)
 
 
