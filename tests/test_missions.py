@@ -257,6 +257,10 @@ def test_sorties_fly_in_order_and_bad_folders_are_one_line(tmp_path: Path) -> No
     # takes off where the last stopped: a repeat, dropped).
     assert files.start == single.start and stops(files.ops) == stops(single.ops)
     one_error_line(pirl("fly", str(tmp_path)), "no summary.json")
+    summary = json.loads((one / "summary.json").read_text())
+    del summary["env"]  # as an older pirl plan wrote it
+    (one / "summary.json").write_text(json.dumps(summary))
+    one_error_line(pirl("fly", str(one)), "no grid settings")
 
 
 def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_mission(

@@ -95,6 +95,11 @@ def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
         raise ConfigError(f"{folder}: no summary.json (not a folder written by pirl plan)")
     try:
         summary = json.loads(summary_file.read_text())
+        if "env" not in summary:
+            raise ConfigError(
+                f"{summary_file}: no grid settings (written by an older pirl plan); write the "
+                "mission again to fly it"
+            )
         env = VCPPConfig.from_dict(summary["env"])
         settings = MissionSettings.from_dict(summary.get("mission", {}))
     except (json.JSONDecodeError, KeyError, TypeError) as exc:
