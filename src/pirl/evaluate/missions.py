@@ -556,6 +556,9 @@ def write_mission(
     fence = fences(cfg, geo)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)  # a folder like any other, not mkdtemp's owner-only one
     try:
         names = (
             ["mission"] if len(parts) == 1 else [f"sortie-{n}" for n in range(1, len(parts) + 1)]
