@@ -40,6 +40,14 @@ from pirl.world import dynamics as D
 
 Cell = tuple[int, int, int]
 
+_MOVE_ACTION = {delta: action for action, delta in enumerate(D.MOVE_DELTAS)}
+"""The move action of each unit step (x, y, z), from the grid's one move table."""
+
+
+def _unit(axis: int, diff: int) -> tuple[int, ...]:
+    """The unit step along ``axis`` towards a difference ``diff``."""
+    return tuple((1 if diff > 0 else -1) if k == axis else 0 for k in range(3))
+
 
 @dataclass(frozen=True)
 class Op:
@@ -61,7 +69,6 @@ class FlightFiles:
     ops: list[Op]
     plans: list[str]
     items: int
-    photos: int
 
 
 def _plan_files(folder: Path) -> list[Path]:
@@ -114,7 +121,7 @@ def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
     ops: list[Op] = []
     start: Cell | None = None
     camera = [0, 0, 10]
-    items = photos = 0
+    items = 0
     plans = _plan_files(folder)
     for path in plans:
         try:
@@ -147,13 +154,11 @@ def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
             elif cmd == m.MAV_CMD_SET_CAMERA_ZOOM:
                 camera[2] = zoom10_from_percent(p[1])
                 ops.append(Op("camera", camera=(camera[0], camera[1], camera[2])))
-            elif cmd == m.MAV_CMD_IMAGE_START_CAPTURE:
-                photos += 1
-            # DO_SET_CAM_TRIGG_DIST: photos along a leg; the camera's view is booked at every
-            # cell of the leg anyway. RETURN_TO_LAUNCH: the way home covers nothing new.
+            # IMAGE_START_CAPTURE, DO_SET_CAM_TRIGG_DIST: photos; the camera's view is booked
+            # at every cell anyway. RETURN_TO_LAUNCH: the way home covers nothing new.
     if start is None:
         raise ConfigError(f"{folder}: its plan has no take-off or waypoint")
-    return FlightFiles(folder, summary, env, start, ops, [p.name for p in plans], items, photos)
+    return FlightFiles(folder, summary, env, start, ops, [p.name for p in plans], items)
 
 
 class FileFollower:
@@ -205,10 +210,9 @@ class FileFollower:
             diffs = [b - a for a, b in zip(here, op.cell, strict=True)]
             if not any(diffs):
                 return None
-            # The axis furthest from the waypoint first (x+ is action 0, x- 1, y+ 2, ...);
-            # a blocked neighbour tries the next axis.
+            # The axis furthest from the waypoint first; a blocked neighbour tries the next.
             order = sorted((a for a in range(3) if diffs[a]), key=lambda a: -abs(diffs[a]))
-            moves = [2 * a + (0 if diffs[a] > 0 else 1) for a in order]
+            moves = [_MOVE_ACTION[_unit(a, diffs[a])] for a in order]
             for action in moves:
                 d = D.MOVE_DELTAS[action]
                 nxt = (here[0] + d[0], here[1] + d[1], here[2] + d[2])

@@ -69,7 +69,6 @@ class StudentSource:
         self.gate = gate if isinstance(gate, tuple) else (float(gate), "agreement")
         # Hysteresis: once open, the gate closes only below gate_close (PareSettings).
         self.gate_close = self.gate[0] if gate_close is None else float(gate_close)
-        self.gate_rule = (self.gate[0], self.gate_close, self.gate[1])
         self.open = student.passes(*self.gate)
         self.refit_every = int(refit_every)
         self.fit_steps, self.refit_growth = int(fit_steps), float(refit_growth)
@@ -189,7 +188,7 @@ class StudentSource:
             st.student_refits_deferred += 1
         st.refit_s += time.perf_counter() - start
         was_open = self.open
-        self.open = student.gate_after_fit(was_open, *self.gate_rule)
+        self.open = student.gate_after_fit(was_open, self.gate[0], self.gate_close, self.gate[1])
         st.gate_closings += int(was_open and not self.open)
         self._update_student_stats()
         self.health.budget_spent_now()  # the student goes on alone
