@@ -776,7 +776,7 @@ def _fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
         f"flying {folder} back from {', '.join(files.plans)} ({len(files.ops)} waypoints and "
         f"camera settings) in PyFlyt{' with wind' if wind else ', no wind'} ..."
     )
-    f = fly_mission(files, physics, wind)
+    f = fly_mission(files, physics, wind, log=lambda line: console.print(line, highlight=False))
     console.print(
         f"flown: VCR {f['vcr']:.3f} (grid episode {f['vcr_grid']:.3f}), energy "
         f"{f['energy_used']:.3f} of a battery (grid {f['energy_used_grid']:.3f}), end "

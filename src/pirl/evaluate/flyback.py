@@ -18,6 +18,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -229,10 +230,15 @@ class FileFollower:
 
 
 def fly_files(
-    files: FlightFiles, physics: PhysicsConfig | None = None, wind: bool = True
+    files: FlightFiles,
+    physics: PhysicsConfig | None = None,
+    wind: bool = True,
+    log: Callable[[str], Any] | None = None,
+    every_s: float = 30.0,
 ) -> dict[str, Any]:
     """Fly a mission read back by :func:`read_flight` in PyFlyt; the flown figures beside the
-    grid episode's, and under ``"covered"`` the (X, Y) map of ground cells the flight saw."""
+    grid episode's, and under ``"covered"`` the (X, Y) map of ground cells the flight saw.
+    ``log`` gets one line per ``every_s`` wall seconds (a site's flight takes minutes)."""
     from pirl.physics.mission import Mission, scenario_for_seed
     from pirl.physics.pyflyt_backend import PyFlytFlight
 
@@ -246,7 +252,7 @@ def fly_files(
     mission.reset(scenario=scenario)
     follower = FileFollower(files.ops)
     follower.reset(mission.world, 0, seed)
-    began = time.perf_counter()
+    began = last = time.perf_counter()
     with PyFlytFlight(mission) as flight:
         while not mission.done:
             action = follower.next_action()
@@ -255,6 +261,11 @@ def fly_files(
             mission.begin_step(action)
             pose = flight.fly(mission)
             mission.end_step(pose)
+            if log is not None and time.perf_counter() - last >= every_s:
+                last = time.perf_counter()
+                log(f"flown {mission.world.status[0]['steps']:,} steps of about "
+                    f"{files.summary.get('grid_steps', '?'):,}, {mission.sim_seconds:,.0f} "
+                    f"simulated s")  # fmt: skip
     wall = time.perf_counter() - began
     m = mission.metrics()
     s = files.summary
@@ -290,11 +301,12 @@ def fly_mission(
     folder: str | os.PathLike[str] | FlightFiles,
     physics: PhysicsConfig | None = None,
     wind: bool = True,
+    log: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
     """Read a mission folder's files (or take them read), fly them and write ``flown.json``
     beside them (atomically)."""
     files = folder if isinstance(folder, FlightFiles) else read_flight(folder)
-    flown = fly_files(files, physics, wind)
+    flown = fly_files(files, physics, wind, log)
     figures = {k: v for k, v in flown.items() if k != "covered"}
     _write(files.folder / "flown.json", json.dumps(figures, indent=1) + "\n")
     return flown

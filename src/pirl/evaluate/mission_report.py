@@ -59,7 +59,7 @@ def _mission(
         env, chosen, what = mission_source(cfg.env, SCENARIO_SEED, policy, method, "greedy", site)
         summary = write_mission(folder, env, cfg.mission, chosen, SCENARIO_SEED, what)
     log(f"missions: flying {folder.name} back from its files in PyFlyt")
-    flown = fly_mission(folder, cfg.physics)
+    flown = fly_mission(folder, cfg.physics, log=lambda line: log(f"missions: {line}"))
     return {"folder": folder, "summary": summary, "flown": flown}
 
 
