@@ -278,8 +278,10 @@ def test_the_curve_has_measured_points_a_band_and_a_break_even(tmp_path):
     assert {p.advisor.label for p in points} == {good.label, weak.label}
     found = break_even(points, "30x30x3")
     assert found is not None and found.advisor is good and found.p_lo > 0.5
-    text = section(points, band, "stochastic")
-    assert "break-even at agreement 1.00" in text and "| PPO-EWRI |" in text and "0%" in text
+    table = section(points, band, "stochastic")
+    assert any(line.startswith("30x30x3: break-even at agreement 1.00") for line in table.bullets)
+    assert table.rows[-1][:4] == ["PPO-EWRI", "-", "-", "30x30x3"]
+    assert "0%" in [row[2] for row in table.rows]  # the weak advisor shaped none of its runs
     assert plot(points, band, tmp_path / "a.png", "stochastic").stat().st_size > 1000
 
 

@@ -225,10 +225,9 @@ def test_camera_table_gives_steps_relative_to_the_planner():
     table = camera_table(
         [row("boustrophedon", "planner", 200.0, 1.0), row("ppo-ewri", "PPO-EWRI", 300.0, 0.9)]
     )
-    assert "steps / planner's" in table
-    ewri = next(line for line in table.splitlines() if line.startswith("| PPO-EWRI"))
-    cells = [c.strip() for c in ewri.strip("|").split("|")]
-    assert cells[-2] == "1.50" and cells[-1] == "0.30"
+    assert "steps / planner's" in table.header
+    ewri = next(row for row in table.rows if row[0] == "PPO-EWRI")
+    assert ewri[-2] == "1.50" and ewri[-1] == "0.30"
 
 
 def test_report_settings_line_says_masked_or_not():

@@ -270,6 +270,7 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
 
     from pirl.config.run import RunConfig
     from pirl.evaluate.mission_report import reproduction_missions
+    from pirl.evaluate.tables import render_markdown
     from test_sites import write_site
 
     h = np.zeros((10, 12))
@@ -289,7 +290,7 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
         for k, (run, vcr) in enumerate(zip(runs, (0.4, 0.6), strict=True))
     ]  # fmt: skip
     cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
-    title, markdown, figure = reproduction_missions(
+    title, table, figure = reproduction_missions(
         cfg, tmp_path / "out", [str(site)], records, log=lambda _m: None
     )
     missions = tmp_path / "out" / "missions"
@@ -302,5 +303,6 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
         check_plan_against_waypoints(missions / name, "mission")
     planner = json.loads((missions / "block-planner" / "flown.json").read_text())
     assert abs(planner["vcr"] - planner["vcr_grid"]) <= 0.05
+    markdown = render_markdown([table])
     assert "](../missions/block-planner/mission.plan)" in markdown
     assert "best mean grid VCR on block" in markdown and figure.is_file()

@@ -404,8 +404,7 @@ def test_report_puts_physics_beside_grid_and_explains_a_gap_by_counted_events() 
     flights = run_chunk(spec, env, {}, (10, 10, 3), "physics", [0, 1])
     assert [f["end"] for f in flights] == ["step_limit"] * 2  # 5 steps do not cover 10x10
     table = physics_gap_table(grid + flights)
-    row = next(line for line in table.splitlines() if line.startswith("| boustrophedon"))
-    cells = [c.strip() for c in row.strip("|").split("|")]
+    cells = next(row for row in table.rows if row[0].startswith("boustrophedon"))
     vcr_grid = np.mean([g["vcr"] for g in grid])
     vcr_physics = np.mean([f["vcr"] for f in flights])
     assert cells[5:7] == [f"{vcr_grid:.2f}", f"{vcr_physics:.2f}"]
@@ -415,10 +414,10 @@ def test_report_puts_physics_beside_grid_and_explains_a_gap_by_counted_events() 
         {**f, "vcr": f["vcr"] - 0.3, "end": "battery", "timeouts": 4, "energy_timeout": 300.0}
         for f in flights
     ]
-    why = physics_gap_table(grid + bad).splitlines()[-1].split("|")[-2]
+    why = physics_gap_table(grid + bad).rows[-1][-1]
     assert "battery 2 in physics against step_limit 2 on the grid" in why
     assert "4.0 timeouts" in why and "of the battery" in why
-    assert physics_gap_table(grid) == ""  # no physics episodes, no section
+    assert physics_gap_table(grid) is None  # no physics episodes, no section
 
 
 # -- Webots: world generator, controller arguments, pilot (no Webots needed) ----------------

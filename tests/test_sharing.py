@@ -431,4 +431,4 @@ def test_a_damaged_advisor_stats_is_named_and_the_report_still_says_so(tmp_path)
     lines: list[str] = []
     stats = _advisor_stats([run], tmp_path / "none.jsonl", lines.append)
     assert len(lines) == 1 and "advisor_stats.json is damaged" in lines[0]
-    assert "Stats missing for run pirl-s0" in advice_table(stats)
+    assert "Stats missing for run pirl-s0" in advice_table(stats).notes[0]

@@ -227,7 +227,7 @@ def test_evaluate_site_planner_covers_seeable_cells(tmp_path: Path) -> None:
 
 def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
     from pirl.evaluate.physics_report import physics_gap_table
-    from pirl.evaluate.report import camera_table, improvements, markdown_tables
+    from pirl.evaluate.report import camera_table, improvements, paper_tables
     from pirl.evaluate.summary import read_summary
 
     out = tmp_path / "eval"
@@ -238,8 +238,8 @@ def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     rows = read_summary(out / "summary.csv")
     assert [r["size"] for r in rows if r["method"] == "random"] == ["15x15x3", "site:campus"]
-    assert "site:campus VCR" in markdown_tables(rows, "fixed")
-    assert "site:campus" in camera_table(rows)
+    assert "site:campus VCR" in paper_tables(rows, "fixed")[0].header
+    assert "site:campus" in [row[2] for row in camera_table(rows).rows]
     records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
     # The planner's rows as a two-seed PIRL and the same as physics rows: the P(improvement)
     # and the physics gap tables sort a site beside a size too.
@@ -248,7 +248,7 @@ def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
     found = improvements(records + as_pirl, "stochastic")
     assert {c["size"] for c in found} == {"15x15x3", "site:campus"}
     physics = [{**r, "sim": "physics"} for r in as_pirl]
-    assert "site:campus" in physics_gap_table(as_pirl + physics)
+    assert "site:campus" in [row[2] for row in physics_gap_table(as_pirl + physics).rows]
 
 
 # -- mistakes -------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.evaluate.summary import interval_estimates, probability_of_improvement, seed_scores
+from pirl.evaluate.tables import Table
 
 
 @dataclass(frozen=True)
@@ -134,43 +135,42 @@ def plot(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], path: 
     return path
 
 
-def section(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], act: str) -> str:
-    """The report's Markdown: the table of points and the break-even per size."""
-    lines = [
-        f"### Advice quality: PIRL's VCR by its advisor's measured agreement (act {act})",
-        "",
-        "x: the advisor's move agreement with the oracle measured by `pirl advise --score` "
-        "(kappa beside it); VCR: IQM over training seeds [95% interval]; P: P(PIRL improves "
-        "on PPO-EWRI) [95% interval]; shaped: the share of the runs' steps the advice shaped "
-        "(a point below 80% is mostly PPO-EWRI).",
-        "",
-        "| advisor | agreement (kappa) | shaped | size | VCR IQM | P(improvement) | seeds |",
-        "|---|---|---|---|---|---|---|",
-    ]
+def section(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], act: str) -> Table:
+    """The report's table of points, PPO-EWRI's band per size and the break-even per size."""
+    rows = []
     for p in sorted(points, key=lambda p: (p.size, -p.advisor.agreement)):
         a = p.advisor
-        shaped = "-" if a.shaped is None else f"{a.shaped:.0%}"
-        lines.append(
-            f"| {a.label} | {a.agreement:.2f} ({a.kappa:.2f}) | {shaped} | {p.size} | "
-            f"{p.iqm:.3f} [{p.lo:.3f}, {p.hi:.3f}] | {p.p:.2f} [{p.p_lo:.2f}, {p.p_hi:.2f}] | "
-            f"{p.seeds} |"
-        )
+        rows.append([
+            a.label, f"{a.agreement:.2f} ({a.kappa:.2f})",
+            "-" if a.shaped is None else f"{a.shaped:.0%}", p.size,
+            f"{p.iqm:.3f} [{p.lo:.3f}, {p.hi:.3f}]", f"{p.p:.2f} [{p.p_lo:.2f}, {p.p_hi:.2f}]",
+            str(p.seeds),
+        ])  # fmt: skip
     for size, b in band.items():
-        lines.append(
-            f"| PPO-EWRI | - | - | {size} | {b['iqm']:.3f} [{b['iqm_lo']:.3f}, "
-            f"{b['iqm_hi']:.3f}] | - | - |"
-        )
-    lines.append("")
+        iqm = f"{b['iqm']:.3f} [{b['iqm_lo']:.3f}, {b['iqm_hi']:.3f}]"
+        rows.append(["PPO-EWRI", "-", "-", size, iqm, "-", "-"])
+    verdicts = []
     for size in band:
         found = break_even(points, size)
         if found is None:
-            lines.append(f"- {size}: no advisor beats PPO-EWRI with its interval above 0.5.")
+            verdicts.append(f"{size}: no advisor beats PPO-EWRI with its interval above 0.5.")
         else:
-            lines.append(
-                f"- {size}: break-even at agreement {found.advisor.agreement:.2f} "
+            verdicts.append(
+                f"{size}: break-even at agreement {found.advisor.agreement:.2f} "
                 f"({found.advisor.label}: P = {found.p:.2f} [{found.p_lo:.2f}, {found.p_hi:.2f}])."
             )
-    return "\n".join(lines) + "\n"
+    return Table(
+        f"Advice quality: PIRL's VCR by its advisor's measured agreement (act {act})",
+        ["advisor", "agreement (kappa)", "shaped", "size", "VCR IQM", "P(improvement)", "seeds"],
+        rows,
+        intro=[
+            "x: the advisor's move agreement with the oracle measured by `pirl advise --score` "
+            "(kappa beside it); VCR: IQM over training seeds [95% interval]; P: P(PIRL improves "
+            "on PPO-EWRI) [95% interval]; shaped: the share of the runs' steps the advice shaped "
+            "(a point below 80% is mostly PPO-EWRI)."
+        ],
+        bullets=verdicts,
+    )
 
 
 __all__ = [

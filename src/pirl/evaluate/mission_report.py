@@ -20,9 +20,15 @@ from typing import Any
 import numpy as np
 
 from pirl.config.run import RunConfig
+from pirl.evaluate.tables import Cell, Span, Table
 
 SCENARIO_SEED = 0
 """The scenario (the site's start draw) every reproduction mission is written from."""
+
+_HEADER = (
+    "site", "mission", "items (before merging)", "sorties", "distance m", "flight min",
+    "photos", "VCR grid", "VCR flown", "energy flown / grid", "end", "files",
+)  # fmt: skip
 
 
 def best_run(records: list[dict[str, Any]], site: str, act: str) -> tuple[Path, float] | None:
@@ -69,9 +75,9 @@ def reproduction_missions(
     sites: list[str],
     records: list[dict[str, Any]],
     log: Callable[[str], Any] = print,
-) -> tuple[str, str, Path] | None:
+) -> tuple[str, Table, Path] | None:
     """Write and fly the planner's and the best learned policy's mission on every site; the
-    report's (title, markdown section, figure)."""
+    report's (title, table, figure)."""
     if not sites:
         return None
     act = cfg.reproduce.headline_act
@@ -91,34 +97,35 @@ def reproduction_missions(
     return "Missions", section(rows, out / "report"), figure(rows, out / "report" / "missions.png")
 
 
-def section(rows: list[tuple[str, str, list[dict[str, Any]]]], report: Path) -> str:
-    """The markdown table: written mission figures, flown figures, links to the files."""
-    lines = [
-        "## Missions: written, then flown back from the files",
-        "",
-        f"Each mission is one episode of scenario {SCENARIO_SEED} (wind off) written by "
-        "`pirl plan`, then read back from its .plan files and flown in PyFlyt with the physics "
-        "section's wind (`pirl fly`). Learned: the trained run named, acting greedy.",
-        "",
-        "| site | mission | items (before merging) | sorties | distance m | flight min | photos "
-        "| VCR grid | VCR flown | energy flown / grid | end | files |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+def section(rows: list[tuple[str, str, list[dict[str, Any]]]], report: Path) -> Table:
+    """The table: written mission figures, flown figures, links to the files (relative to
+    the ``report`` folder)."""
+    body: list[list[Cell]] = []
     for name, _site, entries in rows:
         for e in entries:
             s, f = e["summary"], e["flown"]
             rel = Path("..") / e["folder"].relative_to(report.parent)
-            plans = " ".join(f"[{p}]({(rel / p).as_posix()})" for p in f["plans"])
-            links = f"{plans} [path.kml]({(rel / 'path.kml').as_posix()})"
+            links = [Span(p, href=(rel / p).as_posix()) for p in [*f["plans"], "path.kml"]]
             chosen = f" ({e['chosen']})" if "chosen" in e else ""
-            lines.append(
-                f"| {name} | {s['method']}{chosen} | {s['items_after_merging']} "
-                f"({s['items_before_merging']}) | {s['sorties']} | {s['distance_m']:,.0f} | "
-                f"{s['flight_time_s'] / 60:.1f} | {s['photos']} | {s['vcr']:.3f} | "
-                f"{f['vcr']:.3f} | {f['energy_used']:.3f} / {f['energy_used_grid']:.3f} | "
-                f"{f['end']} | {links} |"
-            )
-    return "\n".join(lines) + "\n"
+            body.append([
+                name, f"{s['method']}{chosen}",
+                f"{s['items_after_merging']} ({s['items_before_merging']})", str(s["sorties"]),
+                f"{s['distance_m']:,.0f}", f"{s['flight_time_s'] / 60:.1f}", str(s["photos"]),
+                f"{s['vcr']:.3f}", f"{f['vcr']:.3f}",
+                f"{f['energy_used']:.3f} / {f['energy_used_grid']:.3f}", str(f["end"]),
+                tuple(part for link in links for part in (Span(" "), link))[1:],
+            ])  # fmt: skip
+    return Table(
+        "Missions: written, then flown back from the files",
+        _HEADER,
+        body,
+        intro=[
+            f"Each mission is one episode of scenario {SCENARIO_SEED} (wind off) written by "
+            "`pirl plan`, then read back from its .plan files and flown in PyFlyt with the "
+            "physics section's wind (`pirl fly`). Learned: the trained run named, acting greedy."
+        ],
+        level=2,
+    )
 
 
 def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Path:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.evaluate.tables import Table
 from pirl.physics.mission import ENERGY_CAUSES
 
 GAP_EXPLAINED = 0.1
@@ -33,10 +34,16 @@ def _size_order(size: str) -> tuple:
     return size_key(size)
 
 
-def physics_gap_table(records: list[dict[str, Any]]) -> str:
-    """Markdown: per run and size, grid VCR and physics VCR on the same scenarios, the gap,
-    why the physics episodes ended, counted events and the battery by cause; '' without
-    physics episodes."""
+_HEADER = (
+    "method", "run", "size", "act", "n", "grid VCR", "physics VCR", "gap", "end (physics)",
+    "steps grid / physics", "timeouts", "contacts", "recoveries", "battery by cause", "why",
+)  # fmt: skip
+
+
+def physics_gap_table(records: list[dict[str, Any]]) -> Table | None:
+    """Per run and size, grid VCR and physics VCR on the same scenarios, the gap, why the
+    physics episodes ended, counted events and the battery by cause; None without physics
+    episodes."""
     physics: dict[tuple, list[dict[str, Any]]] = defaultdict(list)
     grid: dict[tuple, dict[int, dict[str, Any]]] = defaultdict(dict)
     for r in records:
@@ -45,27 +52,26 @@ def physics_gap_table(records: list[dict[str, Any]]) -> str:
         elif r.get("sim") == "grid":
             grid[_key(r)][int(r["seed"])] = r
     if not physics:
-        return ""
-    lines = [
-        "### Physics beside grid (same scenarios; means over them)",
-        "",
-        "Battery by cause: share of the battery used (docs/physics.md). A gap above "
-        f"{GAP_EXPLAINED} VCR is explained from the counted events.",
-        "",
-        "| method | run | size | act | n | grid VCR | physics VCR | gap | end (physics) | "
-        "steps grid / physics | timeouts | contacts | recoveries | battery by cause | why |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+        return None
+    rows = []
     keys = sorted(physics, key=lambda k: (k[0], str(k[1]), _size_order(k[2]), k[3]))
     for key in keys:
         flights = sorted(physics[key], key=lambda r: int(r["seed"]))
         twins = [grid[key].get(int(r["seed"])) for r in flights]
         paired = [(f, g) for f, g in zip(flights, twins, strict=True) if g is not None]
-        lines.append(_row(key, flights, paired))
-    return "\n".join(lines) + "\n"
+        rows.append(_row(key, flights, paired))
+    return Table(
+        "Physics beside grid (same scenarios; means over them)",
+        _HEADER,
+        rows,
+        intro=[
+            "Battery by cause: share of the battery used (docs/physics.md). A gap above "
+            f"{GAP_EXPLAINED} VCR is explained from the counted events."
+        ],
+    )
 
 
-def _row(key: tuple, flights: list[dict[str, Any]], paired: list[tuple[dict, dict]]) -> str:
+def _row(key: tuple, flights: list[dict[str, Any]], paired: list[tuple[dict, dict]]) -> list[str]:
     method, train_seed, size, act = key
     label = flights[0].get("label", method)
     vcr_p = float(np.mean([f["vcr"] for f in flights]))
@@ -93,11 +99,10 @@ def _row(key: tuple, flights: list[dict[str, Any]], paired: list[tuple[dict, dic
     else:  # no grid episode of these scenarios in this evaluation
         cells, steps, why = ["-", f"{vcr_p:.2f}", "-"], f"- / {steps_p:.0f}", ""
     run = "-" if train_seed is None else str(train_seed)
-    return (
-        f"| {label} | {run} | {size} | {act} | {len(flights)} | {' | '.join(cells)} | "
-        f"{end_text} | {steps} | {counts['timeouts']} | {counts['contacts']} | "
-        f"{counts['recoveries']} | {by_cause} | {why} |"
-    )
+    return [
+        str(label), run, str(size), str(act), str(len(flights)), *cells, end_text, steps,
+        str(counts["timeouts"]), str(counts["contacts"]), str(counts["recoveries"]), by_cause, why,
+    ]  # fmt: skip
 
 
 def _grid_end(r: dict[str, Any]) -> str:

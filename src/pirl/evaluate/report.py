@@ -1,28 +1,32 @@
 """The reproduction report: paper-layout tables, figures, animations and one HTML file.
 
-Inputs are what evaluation and training wrote (``summary.csv``, run folders); outputs land in
-the report folder: ``table.md``, ``figure.png``, ``learning_curves.png``, ``gifs/*.gif`` and
-``report.html`` (self-contained: every image embedded).
+Inputs are what evaluation and training wrote (``summary.csv``, ``episodes.jsonl``, run
+folders); outputs land in the report folder: ``table.md``, ``figure.png``,
+``intervals_<act>.png``, ``learning_curves.png`` and ``report.html`` (self-contained: every
+image embedded). Each table is built once as rows (:class:`pirl.evaluate.tables.Table`);
+``table.md`` is rendered from the rows and ``report.html`` from the Jinja2 template
+``templates/report.html.j2``.
 """
 
 from __future__ import annotations
 
 import base64
 import csv
-import html
+import functools
 import json
 import math
-import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
+from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select_autoescape
 
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary, size_key
+from pirl.evaluate.tables import Cell, Span, Table, render_markdown
 
 # The paper's results (its tables): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
@@ -63,7 +67,7 @@ ACT_NOTE = {
 }
 
 
-def _cell(row: dict[str, Any], metric: str, stat: str = "iqm") -> str:
+def _stat(row: dict[str, Any], metric: str, stat: str = "iqm") -> str:
     """``IQM [lo, hi]`` over runs (seeds), or ``mean ± per-episode CI`` for ``stat="episode"``."""
     if stat == "episode":
         mean, half = row[f"{metric}_mean"], row[f"{metric}_ci95"]
@@ -86,8 +90,9 @@ def _act_rows(rows: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
     return [r for r in rows if r.get("act", "greedy") in (act, "fixed")]
 
 
-def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: str = "iqm") -> str:
-    """Tables in the paper's layout for one act mode, the paper's value beside ours.
+def paper_tables(rows: list[dict[str, Any]], act: str, stat: str = "iqm") -> list[Table]:
+    """Tables in the paper's layout for one act mode (one per simulator), the paper's value
+    beside ours.
 
     ``stat="iqm"``: IQM over training seeds with its stratified bootstrap 95% interval;
     ``stat="episode"``: the mean over all episodes ± the per-episode 95% CI (the spread over
@@ -95,7 +100,6 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
     (planner, oracle-advised PIRL, PIRL variants, random) follow under a rule and are not
     ranked.
     """
-    act = act or acts_of(rows)[0]
     rows = _act_rows(rows, act)
     what = (
         "IQM over training seeds [stratified bootstrap 95% interval]"
@@ -103,7 +107,7 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
         else "mean over episodes ± 95% CI over episodes"
     )
     key = "iqm" if stat == "iqm" else "mean"
-    parts = []
+    tables = []
     for sim in ("grid", "physics"):
         sim_rows = [r for r in rows if r["sim"] == sim]
         if not sim_rows:
@@ -111,7 +115,7 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
         sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
         by = {(r["method"], r["size"]): r for r in sim_rows}
         methods = [m for m in PAPER_METHODS if any((m, s) in by for s in sizes)]
-        extras = sorted({r["method"] for r in sim_rows} - set(PAPER_METHODS), key=_method_order)
+        extras = sorted({r["method"] for r in sim_rows} - set(PAPER_METHODS), key=report_order)
         best: dict[tuple[str, str], float] = {}
         for size in sizes:
             for metric in METRICS:
@@ -120,15 +124,13 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
                     pick = max if HIGHER_IS_BETTER[metric] else min
                     best[(size, metric)] = pick(values)
         head = ["method", "seeds"] + [f"{s} {m.upper()}" for s in sizes for m in METRICS]
-        lines = [
-            f"### {SIM_TITLES[sim]}, act {act} (ours: {what}; paper in brackets)",
-            "",
-            "| " + " | ".join(head) + " |",
-            "|" + "---|" * len(head),
-        ]
+        rule = [Span("extras, not in the paper", italic=True), *[""] * (len(head) - 1)]
+        body: list[list[Cell]] = []
         for method in methods + extras:
+            if extras and method == extras[0]:
+                body.append(rule)
             first = next(by[(method, s)] for s in sizes if (method, s) in by)
-            cells = [first["label"], str(int(first.get("seeds", 1)))]
+            cells: list[Cell] = [first["label"], str(int(first.get("seeds", 1)))]
             for size in sizes:
                 row = by.get((method, size))
                 paper = PAPER.get(sim, {}).get(method, {}).get(size)
@@ -136,27 +138,20 @@ def markdown_tables(rows: list[dict[str, Any]], act: str | None = None, stat: st
                     if row is None:
                         cells.append("—")
                         continue
-                    text = _cell(row, metric, stat)
-                    if method in PAPER_METHODS and row[f"{metric}_{key}"] == best.get(
-                        (size, metric)
-                    ):
-                        text = f"**{text}**"
-                    if paper is not None:
-                        text += f" ({paper[k]:.2f})"
-                    cells.append(text)
-            if extras and method == extras[0]:
-                lines.append("| *extras, not in the paper* |" + " |" * (len(head) - 1))
-            lines.append("| " + " | ".join(cells) + " |")
+                    ranked = method in PAPER_METHODS
+                    bold = ranked and row[f"{metric}_{key}"] == best.get((size, metric))
+                    value = Span(_stat(row, metric, stat), bold=bold)
+                    cells.append(value if paper is None else (value, Span(f" ({paper[k]:.2f})")))
+            body.append(cells)
         n = sorted({int(r["n"]) for r in sim_rows})
-        lines += [
-            "",
+        note = (
             f"Act {act}: {ACT_NOTE.get(act, act)}; planners, LLM-only and random act by their "
             f"own rule (act fixed: the same episodes in every act table, one run). Episodes per "
-            f"cell (all seeds): {', '.join(map(str, n))}.",
-            "",
-        ]
-        parts.append("\n".join(lines))
-    return "\n".join(parts)
+            f"cell (all seeds): {', '.join(map(str, n))}."
+        )
+        title = f"{SIM_TITLES[sim]}, act {act} (ours: {what}; paper in brackets)"
+        tables.append(Table(title, head, body, notes=[note]))
+    return tables
 
 
 CAMERA = (
@@ -165,50 +160,54 @@ CAMERA = (
 )  # fmt: skip
 
 
-def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> str:
+def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
     """Camera use beside coverage: per method, size and act mode, the share of camera
     actions, mean footprint, final tilt and zoom, steps, steps relative to the planner's on
-    the same scenarios (mean steps over mean planner steps), and VCR per 100 steps."""
+    the same scenarios (mean steps over mean planner steps), and VCR per 100 steps; None
+    without rows of ``sim``."""
     from pirl.agents.boustrophedon import BoustrophedonPolicy
 
     sim_rows = [r for r in rows if r["sim"] == sim]
     if not sim_rows:
-        return ""
+        return None
     planner = {
         r["size"]: r.get("steps_mean") for r in sim_rows if r["method"] == BoustrophedonPolicy.name
     }
     head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
     head += ["steps / planner's", "VCR per 100 steps"]
-    lines = [
-        f"### Camera use ({sim} simulator; means over episodes)",
-        "",
-        "| " + " | ".join(head) + " |",
-        "|" + "---|" * len(head),
-    ]
     order = sorted(
         sim_rows,
         key=lambda r: (
-            _method_order(r["method"]), r["label"], r.get("act", ""),
-            size_key(r["size"]),
+            report_order(r["method"]), r["label"], r.get("act", ""), size_key(r["size"]),
         ),
     )  # fmt: skip
+    body = []
     for r in order:
-        cells = [r["label"], r.get("act", ""), r["size"], _cell(r, "vcr")]
+        cells = [r["label"], r.get("act", ""), r["size"], _stat(r, "vcr")]
         cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
         steps = r.get("steps_mean", math.nan)
         ref = planner.get(r["size"])
         cells.append(f"{steps / ref:.2f}" if ref and steps and steps > 0 else "—")
         cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        body.append(cells)
+    return Table(f"Camera use ({sim} simulator; means over episodes)", head, body)
 
 
-def advice_table(advisor_stats: dict[str, Any] | None) -> str:
-    """How much of each PIRL run the advice really shaped (from its ``advisor_stats.json``).
+_ADVICE_HEAD = (
+    "run", "label", "shaped by the student", "by the teacher", "unshaped",
+    "mean staleness (steps)", "teacher calls per env-step", "student agreement (majority)",
+    "budget spent at step",
+)  # fmt: skip
+
+
+def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
+    """How much of each PIRL run the advice really shaped (from its ``advisor_stats.json``),
+    and a line per run whose stats are damaged; None when there is neither.
 
     A PIRL row in the tables above is PPO-EWRI wherever its steps were unshaped (the student
     below its gate, failed answers, a spent budget): this table says how often.
     """
+    title = "How much advice shaped each PIRL run (training)"
     runs = {
         name: s for name, s in (advisor_stats or {}).items() if isinstance(s, dict) and "steps" in s
     }
@@ -219,16 +218,8 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
     )
     missing = [f"Stats missing for run {name}: {why}." for name, why in damaged]
     if not runs:
-        head = ["### How much advice shaped each PIRL run (training)", ""]
-        return "\n".join([*head, *missing]) + "\n" if missing else ""
-    lines = [
-        "### How much advice shaped each PIRL run (training)",
-        "",
-        "| run | label | shaped by the student | by the teacher | unshaped | mean staleness "
-        "(steps) | teacher calls per env-step | student agreement (majority) | budget spent "
-        "at step |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+        return Table(title, notes=missing) if missing else None
+    body = []
     for name, s in sorted(runs.items()):
         steps = max(1, int(s["steps"]))
         label = s.get("label", "")
@@ -242,15 +233,13 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> str:
             else "-"
         )
         spent = s.get("budget_exhausted_at_step", -1)
-        lines.append(
-            f"| {name} | {label} | {s.get('steps_student', 0) / steps:.0%} | "
-            f"{teacher / steps:.0%} | {unshaped / steps:.0%} | "
-            f"{s.get('mean_staleness', 0.0):.1f} | {s.get('teacher_calls_per_step', 0.0):.4f} | "
-            f"{agreement} | {spent if spent >= 0 else 'not spent'} |"
-        )
-    if missing:
-        lines += ["", *missing]
-    return "\n".join(lines) + "\n"
+        body.append([
+            name, label, f"{s.get('steps_student', 0) / steps:.0%}", f"{teacher / steps:.0%}",
+            f"{unshaped / steps:.0%}", f"{s.get('mean_staleness', 0.0):.1f}",
+            f"{s.get('teacher_calls_per_step', 0.0):.4f}", agreement,
+            str(spent) if spent >= 0 else "not spent",
+        ])  # fmt: skip
+    return Table(title, _ADVICE_HEAD, body, notes=missing)
 
 
 def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
@@ -271,8 +260,8 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
         if r.get("source"):
             sources.setdefault(r["method"], set()).add(str(r["source"]))
     labels = {m: honest_label(lab, sources.get(m, ())) for m, lab in labels.items()}
-    pirls = sorted({m for m, _, _ in groups if is_advised_key(m)}, key=_method_order)
-    others = sorted({m for m, _, _ in groups if not is_advised_key(m)}, key=_method_order)
+    pirls = sorted({m for m, _, _ in groups if is_advised_key(m)}, key=report_order)
+    others = sorted({m for m, _, _ in groups if not is_advised_key(m)}, key=report_order)
     keys = sorted({(s, z) for _, s, z in groups}, key=lambda k: (k[0], size_key(k[1])))
     out = []
     for pirl in pirls:
@@ -294,31 +283,27 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
 
 def improvement_table(
     records: list[dict[str, Any]], act: str, found: list[dict[str, Any]] | None = None
-) -> str:
+) -> Table | None:
     """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
-    with the stratified bootstrap 95% interval (rliable). ``found``: :func:`improvements`,
-    when already computed."""
+    with the stratified bootstrap 95% interval (rliable); None without a comparison.
+    ``found``: :func:`improvements`, when already computed."""
     found = improvements(records, act) if found is None else found
     if not found:
-        return ""
+        return None
     others = list(dict.fromkeys(f["other"] for f in found))
-    lines = [
-        f"### Probability of improvement in VCR (act {act}; runs = training seeds)",
-        "",
-        "P(a run of the row's PIRL scores a higher mean VCR than a run of the column's "
-        "method) [stratified bootstrap 95% interval]; 0.5 = no difference.",
-        "",
-        "| PIRL | sim | size | " + " | ".join(others) + " |",
-        "|" + "---|" * (3 + len(others)),
-    ]
     cells: dict[tuple[str, str, str], dict[str, str]] = {}
     for f in found:
         cell = cells.setdefault((f["pirl"], f["sim"], f["size"]), {})
         cell[f["other"]] = f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
-    for (pirl, sim, size), row in cells.items():
-        values = [row.get(o, "—") for o in others]
-        lines.append("| " + " | ".join([pirl, sim, size, *values]) + " |")
-    return "\n".join(lines) + "\n"
+    return Table(
+        f"Probability of improvement in VCR (act {act}; runs = training seeds)",
+        ["PIRL", "sim", "size", *others],
+        [[*key, *(row.get(o, "—") for o in others)] for key, row in cells.items()],
+        intro=[
+            "P(a run of the row's PIRL scores a higher mean VCR than a run of the column's "
+            "method) [stratified bootstrap 95% interval]; 0.5 = no difference."
+        ],
+    )
 
 
 def summary_lines(
@@ -413,7 +398,7 @@ def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str =
 
     sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
     sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
-    methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
+    methods = sorted({r["method"] for r in sim_rows}, key=report_order)
     labels = {r["method"]: f"{r['label']} ({int(r.get('seeds', 1))} seeds)" for r in sim_rows}
     by = {(r["method"], r["size"]): r for r in sim_rows}
     fig, axes = plt.subplots(
@@ -441,9 +426,10 @@ def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str =
     return path
 
 
-def bar_figure(
-    rows: list[dict[str, Any]], path: Path, sim: str = "grid", act: str | None = None
-) -> Path:
+_BAR_FIGURES = {"grid": "figure.png", "physics": "figure_physics.png"}
+
+
+def bar_figure(rows: list[dict[str, Any]], path: Path, sim: str, act: str) -> Path:
     """Grouped bars of VCR, BE and RVC per method and size for one act mode, with per-episode
     95% CI error bars."""
     import matplotlib
@@ -451,10 +437,9 @@ def bar_figure(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    act = act or acts_of(rows)[0]
     sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
     sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
-    methods = sorted({r["method"] for r in sim_rows}, key=_method_order)
+    methods = sorted({r["method"] for r in sim_rows}, key=report_order)
     labels = {r["method"]: r["label"] for r in sim_rows}
     by = {(r["method"], r["size"]): r for r in sim_rows}
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
@@ -513,62 +498,68 @@ def learning_curves(runs: Sequence[Path], path: Path) -> Path:
     return path
 
 
-def _method_order(method: str) -> tuple[int, str]:
-    return report_order(method)
-
-
 def _data_uri(path: Path) -> str:
     mime = {"png": "image/png", "gif": "image/gif"}[path.suffix.lstrip(".").lower()]
     return f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode()
 
 
-def _md_table_to_html(markdown: str) -> str:
-    out, rows = [], []
+@dataclass(frozen=True)
+class _Image:
+    """An image of the page: its heading (or caption), alt text and data URI."""
 
-    def flush() -> None:
-        if rows:
-            head, body = rows[0], rows[1:]
-            out.append("<table><thead><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>")
-            out.append("</thead><tbody>")
-            for r in body:
-                out.append("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>")
-            out.append("</tbody></table>")
-            rows.clear()
-
-    for line in markdown.splitlines():
-        if line.startswith("|") and not line.startswith("|---"):
-            cells = [html.escape(c.strip()) for c in line.strip("|").split("|")]
-            cells = [_links(_bold(c)) for c in cells]
-            rows.append(cells)
-        elif line.startswith("|---"):
-            continue
-        else:
-            flush()
-            if line.startswith("### "):
-                out.append(f"<h3>{html.escape(line[4:])}</h3>")
-            elif line.startswith("## "):
-                out.append(f"<h2>{html.escape(line[3:])}</h2>")
-            elif line.strip():
-                out.append(f"<p>{html.escape(line)}</p>")
-    flush()
-    return "\n".join(out)
+    title: str
+    alt: str
+    src: str
 
 
-_LINK = re.compile(r"\[([^\]]+)\]\(([^)\s]+)\)")
+def _image(title: str, alt: str, path: Path) -> _Image:
+    return _Image(title, alt, _data_uri(path))
 
 
-def _links(cell: str) -> str:
-    """Markdown links ``[text](href)`` of an escaped cell as anchors (a run's mission files)."""
-    return _LINK.sub(lambda m: f"<a href='{m.group(2)}'>{m.group(1)}</a>", cell)
+def result_tables(
+    rows: list[dict[str, Any]],
+    records: list[dict[str, Any]],
+    acts: list[str],
+    advisor_stats: dict[str, Any] | None = None,
+    extras: Sequence[Table] = (),
+    found: list[dict[str, Any]] | None = None,
+) -> list[Table]:
+    """The report's results in reading order: for each act mode (``acts``, the headline
+    first) the IQM tables over seeds; how much advice shaped each PIRL run; ``extras``; the
+    probability of improvement of PIRL over each baseline (headline mode; ``found``:
+    :func:`improvements`, when already computed), camera use, physics beside grid; then the
+    per-episode tables (the secondary spread)."""
+    headline = (
+        f"Headline act mode: {acts[0]} (the same for every trained method; see docs/results.md)."
+    )
+    optional = [
+        advice_table(advisor_stats),
+        *extras,
+        improvement_table(records, acts[0], found),
+        camera_table(rows),
+        physics_gap_table(records),
+    ]
+    return [
+        Table(intro=[headline]),
+        *(table for act in acts for table in paper_tables(rows, act)),
+        *(table for table in optional if table is not None),
+        Table("Secondary: spread over episodes", level=2),
+        *(table for act in acts for table in paper_tables(rows, act, stat="episode")),
+    ]
 
 
-def _bold(cell: str) -> str:
-    if cell.startswith("**") and "**" in cell[2:]:
-        end = cell.index("**", 2)
-        return f"<b>{cell[2:end]}</b>{cell[end + 2 :]}"
-    if cell.startswith("*") and cell.endswith("*"):
-        return f"<i>{cell.strip('*')}</i>"
-    return cell
+@functools.cache
+def _page_template() -> Template:
+    env = Environment(
+        loader=PackageLoader("pirl.evaluate", "templates"),
+        # The default extensions (html, htm, xml) miss a ``.html.j2`` name: escaping off.
+        autoescape=select_autoescape(("html.j2",)),
+        undefined=StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    return env.get_template("report.html.j2")
 
 
 def write_report(
@@ -580,133 +571,61 @@ def write_report(
     code_version: str = "unknown",
     notes: Sequence[str] = (),
     headline_act: str = "stochastic",
-    extras: Sequence[tuple[str, str, Path]] = (),
+    extras: Sequence[tuple[str, Table, Path]] = (),
 ) -> Path:
-    """Write table.md, figure.png, intervals.png, learning_curves.png and report.html.
+    """Write table.md, figure.png, intervals_<act>.png, learning_curves.png and report.html;
+    returns the path of report.html.
 
-    ``extras``: further (title, markdown section, figure) to show after the advice table (the
+    ``extras``: further (title, table, figure) to show after the advice table (the
     advice-quality curve of ``pirl reproduce --profile study-advice``, the missions of
-    ``reproduce.missions``).
+    ``reproduce.missions``); report.html shows their figures at the top.
 
     table.md and report.html open with a summary generated from the numbers
-    (:func:`summary_lines`); report.html shows the interval figures next. table.md then holds,
-    for the headline act mode first and then the other, the IQM tables over seeds; then the
-    probability of improvement of PIRL over each baseline (headline mode), camera use, and the
-    per-episode tables (the secondary spread).
+    (:func:`summary_lines`); report.html shows the interval figures next. Then both hold the
+    tables of :func:`result_tables`; report.html ends with the bar figures, learning curves,
+    animations, advisor statistics and each run's config.yaml as written.
     """
     folder.mkdir(parents=True, exist_ok=True)
     rows = read_summary(summary)
     acts = acts_of(rows, headline_act)
-    episodes_path = Path(summary).with_name("episodes.jsonl")
-    records = [json.loads(line) for line in episodes_path.open()] if episodes_path.is_file() else []
-    blocks = [markdown_tables(rows, act) for act in acts]
+    episodes = Path(summary).with_name("episodes.jsonl")
+    records = [json.loads(line) for line in episodes.open()] if episodes.is_file() else []
     found = improvements(records, acts[0]) if records else []
-    improvement = improvement_table(records, acts[0], found)
-    summary_text = summary_lines(rows, found, advisor_stats, acts[0])
-    camera = camera_table(rows)
-    spread = [markdown_tables(rows, act, stat="episode") for act in acts]
-    results = "\n".join(
-        [
-            f"Headline act mode: {acts[0]} (the same for every trained method; see "
-            "docs/results.md).",
-            "",
-            *blocks,
-            advice_table(advisor_stats),
-            *(markdown for _, markdown, _ in extras),
-            improvement,
-            camera,
-            physics_gap_table(records),
-            "## Secondary: spread over episodes",
-            "",
-            *spread,
-        ]
-    )
-    table = "\n".join(["## Summary", "", *(f"- {line}" for line in summary_text), "", results])
-    (folder / "table.md").write_text(table + "\n")
-    figures = {"grid": bar_figure(rows, folder / "figure.png", "grid", acts[0])}
-    if any(r["sim"] == "physics" for r in rows):
-        figures["physics"] = bar_figure(rows, folder / "figure_physics.png", "physics", acts[0])
-    intervals = {
-        act: interval_figure(rows, folder / f"intervals_{act}.png", act)
+    said = summary_lines(rows, found, advisor_stats, acts[0])
+    top = Table("Summary", bullets=said, level=2, anchor="summary")
+    results = result_tables(rows, records, acts, advisor_stats, [t for _, t, _ in extras], found)
+    (folder / "table.md").write_text(render_markdown([top, *results]))
+
+    glance = [
+        _image(f"Aggregate intervals over seeds (grid, act {act})", f"intervals {act}",
+               interval_figure(rows, folder / f"intervals_{act}.png", act))
         for act in acts
         if any(r["sim"] == "grid" for r in rows)
-    }
-    curves = learning_curves(runs, folder / "learning_curves.png")
-
-    # At a glance first: what the numbers say, then the intervals, then the tables.
-    sections = [
-        "<h1>PIRL reproduction report</h1>",
-        "<h2 id='summary'>Summary</h2><ul>",
-        *(f"<li>{html.escape(line)}</li>" for line in summary_text),
-        "</ul>",
-    ]
-    for act, path in intervals.items():
-        sections.append(
-            f"<h2>Aggregate intervals over seeds (grid, act {act})</h2>"
-            f"<img alt='intervals {act}' src='{_data_uri(path)}'>"
-        )
-    for title, _, figure in extras:
-        sections.append(
-            f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' "
-            f"src='{_data_uri(figure)}'>"
-        )
-    sections += [
-        f"<p>Code version: <code>{html.escape(code_version)}</code></p>",
-        *(f"<p>{html.escape(n)}</p>" for n in notes),
-        "<h2>Results</h2>",
-        _md_table_to_html(results),
-    ]
-    for sim, path in figures.items():
-        sections.append(
-            f"<h2>Figure ({sim}, act {acts[0]}; per-episode spread)</h2>"
-            f"<img alt='{sim} bars' src='{_data_uri(path)}'>"
-        )
-    sections.append(f"<h2>Learning curves</h2><img alt='curves' src='{_data_uri(curves)}'>")
-    if gifs:
-        sections.append("<h2>One episode per method (same 30x30x3 scenario)</h2><div class='g'>")
-        for label, gif in gifs.items():
-            sections.append(
-                f"<figure><img alt='{html.escape(label)}' src='{_data_uri(gif)}'>"
-                f"<figcaption>{html.escape(label)}</figcaption></figure>"
-            )
-        sections.append("</div>")
-    if advisor_stats:
-        sections.append("<h2>Advisor statistics</h2><pre>")
-        sections.append(html.escape(json.dumps(advisor_stats, indent=2, sort_keys=True)))
-        sections.append("</pre>")
-    sections.append("<h2>Configurations</h2>")
-    for run in runs:
-        cfg_path = Path(run) / "config.yaml"
-        if cfg_path.is_file():
-            text = yaml.safe_dump(yaml.safe_load(cfg_path.read_text()), sort_keys=False)
-            sections.append(f"<h3>{html.escape(Path(run).name)}</h3><pre>{html.escape(text)}</pre>")
-    page = _PAGE.replace("{body}", "\n".join(sections))
+    ]  # fmt: skip
+    glance += [_image(title, title, figure) for title, _, figure in extras]
+    sims = ["grid"] + (["physics"] if any(r["sim"] == "physics" for r in rows) else [])
+    figures = [
+        _image(f"Figure ({sim}, act {acts[0]}; per-episode spread)", f"{sim} bars",
+               bar_figure(rows, folder / _BAR_FIGURES[sim], sim, acts[0]))
+        for sim in sims
+    ]  # fmt: skip
+    figures.append(
+        _image("Learning curves", "curves", learning_curves(runs, folder / "learning_curves.png"))
+    )
+    configs = [(Path(r).name, Path(r) / "config.yaml") for r in runs]
+    page = _page_template().render(
+        summary=top,
+        glance=glance,
+        code_version=code_version,
+        notes=notes,
+        results=results,
+        figures=figures,
+        gifs=[_image(label, label, gif) for label, gif in (gifs or {}).items()],
+        advisor_stats=json.dumps(advisor_stats, indent=2, sort_keys=True) if advisor_stats else "",
+        configs=[(name, path.read_text()) for name, path in configs if path.is_file()],
+    )
     out = folder / "report.html"
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(page)
     tmp.replace(out)
     return out
-
-
-_PAGE = """<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>PIRL reproduction report</title>
-<style>
-body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
-table{border-collapse:collapse;font-size:12px;margin:1em 0}
-td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
-td:first-child,th:first-child{text-align:left}
-img{max-width:100%}.g{display:flex;flex-wrap:wrap;gap:1em}
-figure{margin:0}figcaption{font-size:12px;text-align:center}
-pre{background:#f6f6f6;padding:.5em;font-size:11px;overflow:auto}
-</style></head>
-<body>
-{body}
-<script>
-window.addEventListener('load', function () {
-  var imgs = Array.prototype.slice.call(document.images);
-  var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;
-  document.body.setAttribute('data-images', ok + '/' + imgs.length);
-});
-</script>
-</body></html>
-"""

@@ -1,0 +1,98 @@
+"""The report's tables as data: each is built once from the numbers as rows of cells, then
+rendered to Markdown here (:func:`render_markdown`, ``table.md``) and to HTML by the report's
+Jinja2 template (``templates/report.html.j2``); neither output is parsed back from the other.
+
+A module of its own (not part of :mod:`pirl.evaluate.report`) because the modules that build
+a table for the report (the physics, mission and advice-curve tables) are imported by it.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Span:
+    """A piece of a cell: plain, bold or italic text, or a link to ``href`` (a path relative
+    to the report folder, or ``#anchor``)."""
+
+    text: str
+    bold: bool = False
+    italic: bool = False
+    href: str | None = None
+
+
+Cell = str | Span | tuple[Span, ...]
+"""A table cell: plain text, one span, or spans side by side."""
+
+
+@dataclass(frozen=True)
+class Table:
+    """One titled block of the report: paragraphs (``intro``), a table of ``rows`` under
+    ``header`` (no table without a header), paragraphs after it (``notes``) and a bullet list.
+    ``level``: the heading's level; ``anchor``: the heading's id in the HTML page."""
+
+    title: str = ""
+    header: Sequence[str] = ()
+    rows: Sequence[Sequence[Cell]] = ()
+    intro: Sequence[str] = ()
+    notes: Sequence[str] = ()
+    bullets: Sequence[str] = ()
+    level: int = 3
+    anchor: str = ""
+
+    def span_rows(self) -> list[list[tuple[Span, ...]]]:
+        """The rows with every cell as its spans (what a renderer walks)."""
+        return [[spans(cell) for cell in row] for row in self.rows]
+
+
+def spans(cell: Cell) -> tuple[Span, ...]:
+    """A cell as its spans."""
+    if isinstance(cell, str):
+        return (Span(cell),)
+    return (cell,) if isinstance(cell, Span) else cell
+
+
+def render_markdown(tables: Iterable[Table]) -> str:
+    """The tables as Markdown, one after another, each block followed by a blank line."""
+    lines: list[str] = []
+    for table in tables:
+        if table.title:
+            lines += ["#" * table.level + " " + table.title, ""]
+        for text in table.intro:
+            lines += [text, ""]
+        if table.header:
+            lines.append(_markdown_row(table.header))
+            lines.append("|" + "---|" * len(table.header))
+            for row in table.span_rows():
+                lines.append(_markdown_row("".join(map(_markdown_span, c)) for c in row))
+            lines.append("")
+        for text in table.notes:
+            lines += [text, ""]
+        if table.bullets:
+            lines += [*(f"- {text}" for text in table.bullets), ""]
+    return "\n".join(lines)
+
+
+def _markdown_row(cells: Iterable[str]) -> str:
+    # A bare | inside a cell would end the cell: a label may hold one.
+    escaped = (c.replace("|", r"\|") for c in cells)
+    return "|" + "|".join(f" {c} " if c else " " for c in escaped) + "|"
+
+
+def _markdown_span(span: Span) -> str:
+    text = span.text
+    if text and span.bold:
+        text = f"**{text}**"
+    elif text and span.italic:
+        text = f"*{text}*"
+    if span.href is None:
+        return text
+    # A destination with a space or a bracket (a file name may have one) needs <...>.
+    href = f"<{span.href}>" if re.search(r"[\s()]", span.href) else span.href
+    return f"[{text}]({href})"
+
+
+__all__ = ["Cell", "Span", "Table", "render_markdown", "spans"]
