@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -13,10 +13,13 @@ from rich.markup import escape
 from rich.table import Table
 
 from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind, advisor_names
-from pirl.agents.methods import BUILTIN, TRAINED
+from pirl.agents.methods import BUILTIN, PLAYED_ALONE, TRAINED
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
-from pirl.config.world import VCPPConfig
+
+if TYPE_CHECKING:
+    from pirl.config.run import RunConfig
+    from pirl.config.world import VCPPConfig
 
 app = typer.Typer(
     add_completion=False,
@@ -28,7 +31,10 @@ err = Console(stderr=True)
 
 SizeOpt = Annotated[tuple[int, int, int], typer.Option(help="World size X Y Z (cells).")]
 ConfigOpt = Annotated[
-    Path | None, typer.Option("--config", help="YAML file of environment settings.")
+    str | None,
+    typer.Option(
+        "--config", help="Preset name (quick, paper, test) or YAML file: its env section."
+    ),
 ]
 RayOpt = Annotated[
     str | None,
@@ -39,6 +45,53 @@ RayOpt = Annotated[
         "every node shares.",
     ),
 ]
+
+T = TypeVar("T")
+
+
+def _bad_value(option: str, value: str, why: str) -> typer.Exit:
+    """A wrong value of an option, seen while parsing: one line and exit 2 (the project's rule
+    for a user's mistake; Typer's own error is a usage box)."""
+    err.print(f"[bold red]error:[/] {escape(f'{option} {value!r}: {why}')}", soft_wrap=True)
+    return typer.Exit(2)
+
+
+def _comma_parser(option: str, item: Callable[[str], T], what: str) -> Callable[[str], list[T]]:
+    """Typer's parser of one value of a list option: ``30,45`` holds two, each read by
+    ``item`` (a ValueError of one is ``not {what}``)."""
+
+    def parse(text: str) -> list[T]:
+        values: list[T] = []
+        for part in (p.strip() for p in text.split(",")):
+            if not part:
+                raise _bad_value(option, text, f"an empty value (write {option} A,B)")
+            try:
+                values.append(item(part))
+            except ValueError:
+                raise _bad_value(option, text, f"{part!r} is not {what}") from None
+        return values
+
+    return parse
+
+
+def _flatten(values: list[list[T]] | None) -> list[T] | None:
+    """Typer's callback of a list option: the values of every occurrence, in order."""
+    return [v for group in values for v in group] if values else None
+
+
+def _list_option(
+    option: str, help: str, metavar: str, item: Callable[[str], Any] = str, what: str = "valid"
+) -> Any:
+    """A list option that Typer parses: repeated (``--sizes 30 --sizes 45``), comma-separated
+    (``--sizes 30,45``) or both. For names, sizes and numbers; a list of paths is a plain
+    repeated option instead, since a path may hold a comma."""
+    return typer.Option(
+        option,
+        help=f"{help} Comma-separated or repeated.",
+        metavar=metavar,
+        parser=_comma_parser(option, item, what),
+        callback=_flatten,
+    )
 
 
 def _clean_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -121,16 +174,49 @@ ADVISORS = _names(advisor_names())
 """The advisors --advisor takes: the built-ins and the installed plugins'."""
 
 
-def _env_config(config: Path | None, **overrides: Any) -> VCPPConfig:
-    base = VCPPConfig.from_yaml(config) if config else VCPPConfig()
-    return base.replace(**{k: v for k, v in overrides.items() if v is not None})
+def _run_config(config: str | Path | None) -> RunConfig:
+    """What every ``--config`` reads: a preset by name (quick, paper, test) or a YAML file,
+    all its sections; none: the defaults."""
+    from pirl.config.run import RunConfig
+
+    if not config:
+        return RunConfig()
+    path = _preset(config, "--config")
+    try:
+        return RunConfig.from_yaml(path)
+    except ConfigError:
+        _refuse_env_only(path)
+        raise
+
+
+def _refuse_env_only(path: Path) -> None:
+    """Say where the settings of an env-only file go (render and webots-world once read such
+    files): under ``env:``, as in every preset."""
+    import dataclasses
+
+    from pirl.config.load import read_yaml
+    from pirl.config.world import VCPPConfig
+
+    data = read_yaml(path)
+    env_keys = {f.name for f in dataclasses.fields(VCPPConfig)}
+    if isinstance(data, dict) and data and set(data) <= env_keys:
+        raise ConfigError(
+            f"--config {path}: {', '.join(map(str, data))} are env settings; a preset holds "
+            "them under 'env:' (see configs/quick.yaml)"
+        )
+
+
+def _env(config: str | None, size: tuple[int, int, int], footprint: str | None) -> VCPPConfig:
+    """``--config``'s env section with ``--size`` and, when given, ``--footprint`` applied."""
+    env = _run_config(config).env.replace(size=tuple(size))
+    return env.replace(footprint=footprint) if footprint is not None else env
 
 
 def _make_policy(name: str, seed: int):
     from pirl.agents.loading import load_policy
 
-    if name not in ("random", "boustrophedon"):
-        raise ConfigError(f"--policy {name!r}: allowed values are random, boustrophedon")
+    if name not in PLAYED_ALONE:
+        raise ConfigError(f"--policy {name!r}: allowed values are {', '.join(PLAYED_ALONE)}")
     return load_policy(name, seed=seed)
 
 
@@ -155,7 +241,7 @@ def _metrics_table(rows: list[tuple[str, dict[str, float]]], title: str) -> Tabl
 @app.command()
 @_clean_errors
 def render(
-    policy: Annotated[str, typer.Option(help="random or boustrophedon.")] = "random",
+    policy: Annotated[str, typer.Option(help=f"{_names(PLAYED_ALONE)}.")] = "random",
     size: SizeOpt = (30, 30, 3),
     seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
     out: Annotated[Path, typer.Option(help="GIF to write.")] = Path("episode.gif"),
@@ -175,7 +261,7 @@ def render(
 
     check_seed(seed)
     check_gif_target(out, fps)
-    cfg = _env_config(config, size=tuple(size), footprint=footprint)
+    cfg = _env(config, size, footprint)
     if site is not None:
         from pirl.world.seeable import with_site
 
@@ -199,7 +285,12 @@ def reproduce(
         str | None,
         typer.Option(help=f"PIRL's advisor: {ADVISORS} (default: the preset's)."),
     ] = None,
-    seeds: Annotated[list[int] | None, typer.Option(help="Training seeds per method.")] = None,
+    seeds: Annotated[
+        list[int] | None,
+        _list_option(
+            "--seeds", "Training seeds per method.", "SEED[,SEED...]", int, "a whole number"
+        ),
+    ] = None,
     workers: Annotated[int | None, typer.Option(help="Evaluation worker processes.")] = None,
     out: Annotated[Path | None, typer.Option(help="Output folder (default results/<profile>).")] = (
         None
@@ -354,7 +445,11 @@ def distill(
     ] = "quick",
     policy: Annotated[
         list[str] | None,
-        typer.Option(help="Where states come from: boustrophedon, random or a run folder."),
+        typer.Option(
+            metavar="POLICY",
+            help=f"Where states come from: {', '.join(PLAYED_ALONE)} or a run folder; repeat "
+            f"--policy for several (default: {', '.join(PLAYED_ALONE)}).",
+        ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the state sampling.")] = 0,
     fit_steps: Annotated[int, typer.Option(help="Adam steps of the student's fit.")] = 2000,
@@ -364,11 +459,10 @@ def distill(
 
     from pirl.advice.student import STUDENT_FILE
     from pirl.agents.distill import distill as run_distill
-    from pirl.config.run import RunConfig
 
-    cfg = RunConfig.from_yaml(_preset(config, "--config"))
+    cfg = _run_config(config)
     advisor_kind(teacher).check_key(cfg)
-    sources = _split_sources(policy or ["boustrophedon", "random"], ("boustrophedon", "random"))
+    sources = policy or list(PLAYED_ALONE)
     with Progress(console=console, transient=True) as bar:
         task = bar.add_task("teacher answers", total=states)
 
@@ -394,24 +488,39 @@ def evaluate(
     runs: Annotated[
         list[Path] | None,
         typer.Option(
-            help="Finished run folders: --runs A B, or repeat --runs (a path may hold spaces, "
-            "commas or any character)."
+            metavar="RUN",
+            help="A finished run folder; repeat --runs for several (--runs A --runs B). Each "
+            "value is one path, whatever it holds (spaces, commas, any character).",
         ),
     ] = None,
     methods: Annotated[
-        list[str] | None, typer.Option(help=f"Built-in methods: {', '.join(sorted(BUILTIN))}.")
+        list[str] | None,
+        _list_option("--methods", f"Built-in methods: {', '.join(BUILTIN)}.", "NAME[,NAME...]"),
     ] = None,
-    sizes: Annotated[list[str] | None, typer.Option(help="30, 45, 60 or XxYxZ.")] = None,
+    sizes: Annotated[
+        list[str] | None,
+        _list_option("--sizes", "N (NxNx3) or XxYxZ, default 30,45,60.", "SIZE[,SIZE...]"),
+    ] = None,
     site: Annotated[
         list[Path] | None,
-        typer.Option(help="Site folders (docs/sites.md) evaluated beside the sizes, zero-shot."),
+        typer.Option(
+            metavar="SITE",
+            help="A site folder (docs/sites.md) evaluated beside the sizes, zero-shot; repeat "
+            "--site for several.",
+        ),
     ] = None,
     episodes: Annotated[int, typer.Option(help="Scenarios per size.")] = 100,
-    sim: Annotated[list[str] | None, typer.Option(help="Simulator(s): grid, physics.")] = None,
+    sim: Annotated[
+        list[str] | None, _list_option("--sim", "Simulators: grid, physics.", "SIM[,SIM...]")
+    ] = None,
     out: Annotated[Path, typer.Option(help="Results folder.")] = Path("results/eval"),
     workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
     config: Annotated[
-        Path | None, typer.Option(help="Preset whose env section defines the scenarios.")
+        str | None,
+        typer.Option(
+            help="Preset name (quick, paper, test) or YAML file whose env section defines the "
+            "scenarios."
+        ),
     ] = None,
     advisor: Annotated[str, typer.Option(help=f"Advisor of llm-only: {ADVISORS}.")] = (
         DEFAULT_ADVISOR
@@ -436,12 +545,12 @@ def evaluate(
     try:
         with _StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
             summary = evaluate_runs(
-                out, _split_paths(runs or []), _split_words(methods or []),
-                _split_words(sizes if sizes is not None else ([] if site else ["30", "45", "60"])),
-                episodes, _split_words(sim or ["grid"]),
+                out, list(runs or []), methods or [],
+                sizes if sizes is not None else ([] if site else ["30", "45", "60"]),
+                episodes, sim or ["grid"],
                 workers, _preset(config, "--config") if config is not None else None, advisor,
                 act, overwrite, progress=_episode_progress(bar, "episodes"),
-                ray_address=ray_address, sites=_split_paths(site or []),
+                ray_address=ray_address, sites=list(site or []),
             )  # fmt: skip
     except KeyboardInterrupt:
         raise _interrupted(
@@ -467,37 +576,6 @@ def _episode_progress(bar: Any, label: str) -> Any:
         label, line="{label}: {done}/{total} episodes", bar=bar, tty=console.is_terminal,
         final_at_total=True, out=lambda text: console.print(text, highlight=False),
     )  # fmt: skip
-
-
-def _split_words(values: list[str]) -> list[str]:
-    return [w for v in values for w in str(v).replace(",", " ").split()]
-
-
-def _split_paths(values: list[Path]) -> list[Path]:
-    """Each value is one path, whatever it holds (spaces, commas, any character). Only a
-    value that is no path but whose comma-separated parts all are is read as a list (the
-    old ``--runs a,b`` form)."""
-    out: list[Path] = []
-    for value in values:
-        parts = [p.strip() for p in str(value).split(",")]
-        if not Path(value).exists() and len(parts) > 1 and all(Path(p).exists() for p in parts):
-            out += [Path(p) for p in parts]
-        else:
-            out.append(Path(value))
-    return out
-
-
-def _split_sources(values: list[str], names: tuple[str, ...]) -> list[str]:
-    """``--policy`` values: built-in names (``boustrophedon random`` or ``a,b`` still split)
-    or run folders, each taken whole (spaces, commas and any character kept)."""
-    out: list[str] = []
-    for value in values:
-        words = _split_words([value])
-        if not Path(value).exists() and words and all(w in names for w in words):
-            out += words
-        else:
-            out += [str(p) for p in _split_paths([Path(value)])]
-    return out
 
 
 def _summary_table(path: Path) -> Table:
@@ -526,7 +604,8 @@ def advise(
     size: SizeOpt = (15, 15, 3),
     seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
     config: Annotated[
-        Path | None, typer.Option(help="Preset with advisor settings (e.g. base_url).")
+        str | None,
+        typer.Option(help="Preset name or YAML file with advisor settings (e.g. base_url)."),
     ] = None,
     model: Annotated[str | None, typer.Option(help="openai model, or local model folder.")] = None,
     base_url: Annotated[str | None, typer.Option(help="OpenAI-compatible server URL.")] = None,
@@ -557,7 +636,7 @@ def advise(
     check_seed(seed)
     kind = advisor_kind(advisor)
     if config:
-        cfg = RunConfig.from_yaml(_preset(config, "--config"))
+        cfg = _run_config(config)
     else:  # no config: the prompt this advisor suits (the embedded model: compact)
         cfg = RunConfig().with_overrides(pare={"prompt_variant": kind.prompt_variant})
     if base_url is None:
@@ -689,35 +768,12 @@ def _copies_format_example(rec: Any, prompt: str) -> bool:
     )
 
 
-MULTI_VALUE_OPTIONS = (
-    "--runs", "--methods", "--sizes", "--sim", "--seeds", "--policy", "--site",
-)  # fmt: skip
-
-
-def expand_multi_values(argv: list[str]) -> list[str]:
-    """Let list options take several values after one flag, as users write them:
-    ``--sizes 30 45 60`` becomes ``--sizes 30 --sizes 45 --sizes 60``."""
-    out: list[str] = []
-    current: str | None = None
-    for arg in argv:
-        if arg.startswith("-"):
-            current = arg if arg in MULTI_VALUE_OPTIONS else None
-            out.append(arg)
-        elif current is not None and out[-1] != current:
-            out += [current, arg]
-        else:
-            out.append(arg)
-    return out
-
-
 def main() -> None:
-    """Console entry point."""
-    import sys
-
+    """Console entry point: Typer parses the command line as given."""
     from pirl import _quiet
 
     _quiet.install()
-    app(args=expand_multi_values(sys.argv[1:]), prog_name="pirl")
+    app(prog_name="pirl")
 
 
 @app.command()
@@ -731,14 +787,15 @@ def plan(
     seed: Annotated[int, typer.Option(help="Scenario seed (start cell; obstacles).")] = 0,
     policy: Annotated[Path | None, typer.Option(help="A trained run folder to fly.")] = None,
     method: Annotated[
-        str | None, typer.Option(help="A built-in instead: boustrophedon or random.")
+        str | None, typer.Option(help=f"A built-in instead: {_names(PLAYED_ALONE)}.")
     ] = None,
     act: Annotated[str, typer.Option(help="A trained policy: greedy or stochastic.")] = "greedy",
     gimbal: Annotated[
         str, typer.Option(help="v2: DO_GIMBAL_MANAGER_PITCHYAW; v1: DO_MOUNT_CONTROL.")
     ] = "v2",
     config: Annotated[
-        Path | None, typer.Option(help="A preset whose mission section sets speeds and limits.")
+        str | None,
+        typer.Option(help="Preset name or YAML file whose mission section sets speeds and limits."),
     ] = None,
     fly: Annotated[
         str | None,
@@ -747,13 +804,12 @@ def plan(
 ) -> None:
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
-    from pirl.config.run import RunConfig
     from pirl.evaluate.missions import mission_source, write_mission
 
     check_seed(seed)
     if fly not in (None, "physics"):
         raise ConfigError(f"--fly {fly!r}: allowed value is physics")
-    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    cfg = _run_config(config)
     env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
     summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
     console.print(
@@ -791,15 +847,17 @@ def _fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
 def fly(
     mission: Annotated[Path, typer.Argument(help="A folder written by pirl plan.")],
     config: Annotated[
-        Path | None, typer.Option(help="A preset whose physics section sets wind and the drone.")
+        str | None,
+        typer.Option(
+            help="Preset name or YAML file whose physics section sets wind and the drone."
+        ),
     ] = None,
     wind: Annotated[bool, typer.Option(help="Fly with the physics section's wind.")] = True,
 ) -> None:
     """Fly a written mission in PyFlyt: its .plan files read back from disk, every sortie in
     order; flown coverage and energy beside the grid episode's, in flown.json."""
-    from pirl.config.run import RunConfig
 
-    cfg = RunConfig.from_yaml(_preset(config, "--config")) if config else RunConfig()
+    cfg = _run_config(config)
     _fly_and_print(mission, cfg.physics, wind)
 
 
@@ -816,7 +874,8 @@ def site_check(
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     config: Annotated[
-        Path | None, typer.Option(help="A preset whose env section sets the camera model.")
+        str | None,
+        typer.Option(help="Preset name or YAML file whose env section sets the camera model."),
     ] = None,
 ) -> None:
     """Load and check a site: its size, coverable cells and every reason a cell cannot be seen.
@@ -824,10 +883,9 @@ def site_check(
     Exits 0 when at least one coverable cell can be seen, 1 otherwise."""
     import json
 
-    from pirl.config.run import RunConfig
     from pirl.evaluate import site_check as sc
 
-    env = RunConfig.from_yaml(_preset(config, "--config")).env if config else None
+    env = _run_config(config).env if config else None
     found, seen, report = sc.check_site(site, env)
     if picture is not None:
         report["picture"] = str(sc.picture(found, seen, picture))
@@ -881,9 +939,21 @@ def webots_world(
     policy: Annotated[
         str, typer.Option(help="Run folder or built-in method the controller flies.")
     ] = "boustrophedon",
-    cell_size: Annotated[float, typer.Option(help="Cell size and level height, metres.")] = 2.0,
+    cell_size: Annotated[
+        float,
+        typer.Option(
+            help="Cell size and level height, metres: the Mavic's scale (a preset's physics "
+            "section is PyFlyt's drone)."
+        ),
+    ] = 2.0,
     footprint: Annotated[str | None, typer.Option(help="paper or frustum.")] = None,
-    config: ConfigOpt = None,
+    config: Annotated[
+        str | None,
+        typer.Option(
+            help="Preset name (quick, paper, test) or YAML file: its env section (written "
+            "beside the world as <world>.env.yaml for the controller)."
+        ),
+    ] = None,
     controller: Annotated[
         bool, typer.Option(help="Also write controllers/pirl_mavic/ next to the world.")
     ] = True,
@@ -892,9 +962,17 @@ def webots_world(
     from pirl.config.physics import PhysicsConfig
     from pirl.physics.webots.world import write_world
 
-    cfg = _env_config(config, size=tuple(size), footprint=footprint)
+    cfg = _env(config, size, footprint)
     physics = PhysicsConfig(cell_size_m=cell_size, level_height_m=cell_size, body_radius_m=0.25)
-    config_path = config.resolve() if config else None
-    for path in write_world(out, cfg, seed, physics, policy, config_path, controller):
+    # The controller reads env settings alone (its own --config), so it gets the preset's env
+    # section as a file of its own, by absolute path (Webots runs it in its own folder).
+    env_file = out.with_name(f"{out.stem}.env.yaml").resolve() if config else None
+    written = write_world(out, cfg, seed, physics, policy, env_file, controller)
+    if env_file is not None:
+        import yaml
+
+        env_file.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+        written.append(env_file)
+    for path in written:
         console.print(f"wrote {path}")
     console.print("open the world in Webots (R2023b or later); see docs/physics.md")

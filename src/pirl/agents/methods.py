@@ -55,6 +55,12 @@ class Method:
     """The ``pirl train`` options of this method beyond those every method takes (``--out``,
     ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
 
+    @property
+    def plays_alone(self) -> bool:
+        """A built-in that plays by its own rule, with no run folder and no advisor: what
+        ``pirl render``, ``pirl plan --method`` and ``pirl distill --policy`` can fly."""
+        return self.training == PLAYED and not self.asks
+
     def check_options(self, **given: object) -> None:
         """Refuse, in one line, a ``pirl train`` option this method does not use (given = not
         None)."""
@@ -112,6 +118,8 @@ PPO_METHODS = tuple(m.name for m in METHODS.values() if m.training == TRAIN_PPO)
 """Methods trained with PPO."""
 BUILTIN = tuple(m.name for m in METHODS.values() if m.training == PLAYED)
 """Methods played without training (by name instead of a run folder)."""
+PLAYED_ALONE = tuple(m.name for m in METHODS.values() if m.plays_alone)
+"""Built-ins that play alone (:attr:`Method.plays_alone`), in :data:`METHODS` order."""
 PAPER_METHODS = tuple(m.name for m in METHODS.values() if m.paper)
 """The paper's methods, in its tables' order."""
 
@@ -180,6 +188,7 @@ __all__ = [
     "METHODS",
     "PAPER_METHODS",
     "PLAYED",
+    "PLAYED_ALONE",
     "PPO_METHODS",
     "TRAIN_IMITATION",
     "TRAIN_PPO",
