@@ -12,7 +12,8 @@ import torch
 from sb3_contrib import MaskablePPO
 
 from pirl.agents.imitation import collect_expert, load_expert
-from pirl.agents.loading import load_policy, mask_probabilities, run_masked
+from pirl.agents.loading import load_policy, mask_probabilities
+from pirl.agents.run_folder import RunFolder
 from pirl.agents.train import train
 from pirl.config.run import RunConfig
 from pirl.env.vcpp_env import VCPPEnv
@@ -53,7 +54,7 @@ def test_masked_pirl_trains_resumes_exactly_and_records_masking(tmp_path):
     sb = json.loads((first / "advisor_stats.json").read_text())
     for key in ("steps", "steps_student", "teacher_calls"):
         assert sa[key] == sb[key], key
-    assert run_masked(first) and (first / "tb").is_dir()
+    assert RunFolder(first).masked and (first / "tb").is_dir()
     assert (tmp_path / "a" / "episodes.csv").read_text() == (first / "episodes.csv").read_text()
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pirl.agents.train import env_config_for, train, training_env_config
+from pirl.agents.train import resolved_config, train, training_env
 from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
@@ -44,8 +44,8 @@ def test_mixed_start_draws_half_its_scenarios_at_random_poses() -> None:
 
 def test_camera_start_reaches_the_training_env_only(tmp_path) -> None:
     cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"camera_start": "random"})
-    assert training_env_config("ppo-ewri", cfg).start_camera == "random"
-    assert env_config_for("ppo-ewri", cfg).start_camera == "fixed"
+    assert training_env(resolved_config("ppo-ewri", cfg)).start_camera == "random"
+    assert resolved_config("ppo-ewri", cfg).env.start_camera == "fixed"
     # The run's config.yaml (what evaluations build their env from) keeps the fixed start.
     train("ppo-ewri", cfg, tmp_path / "run", seed=0, show_progress=False)
     saved = RunConfig.from_yaml(tmp_path / "run" / "config.yaml")

@@ -274,12 +274,12 @@ def test_same_label_different_config_and_duplicates_are_refused(runs, tmp_path):
     data["ppo"]["learning_rate"] = 0.001
     (b / "config.yaml").write_text(yaml.safe_dump(data))
     ev = tmp_path / "eval"
-    proc = _pirl("evaluate", "--runs", str(a), str(b), "--out", str(ev), cwd=tmp_path)
+    proc = _pirl("evaluate", "--runs", str(a), "--runs", str(b), "--out", str(ev), cwd=tmp_path)
     _one_clean_line(proc, "ppo.learning_rate", "0.0003", "0.001")
-    proc = _pirl("evaluate", "--runs", str(a), str(a), "--out", str(ev), cwd=tmp_path)
+    proc = _pirl("evaluate", "--runs", str(a), "--runs", str(a), "--out", str(ev), cwd=tmp_path)
     _one_clean_line(proc, "twice")
     c = _copy(runs["sr1"], tmp_path / "c")  # a copy of the same run (same seed)
-    proc = _pirl("evaluate", "--runs", str(a), str(c), "--out", str(ev), cwd=tmp_path)
+    proc = _pirl("evaluate", "--runs", str(a), "--runs", str(c), "--out", str(ev), cwd=tmp_path)
     _one_clean_line(proc, "copies of one run")
     assert not ev.exists()
 

@@ -232,7 +232,7 @@ def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
 
     out = tmp_path / "eval"
     proc = pirl(
-        "evaluate", "--methods", "boustrophedon", "random", "--sizes", "15",
+        "evaluate", "--methods", "boustrophedon,random", "--sizes", "15",
         "--site", str(EXAMPLES / "campus"), "--episodes", "2", "--out", str(out),
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr

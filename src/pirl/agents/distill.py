@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from pirl.advice.student import STUDENT_FILE
-from pirl.agents.loading import load_policy, run_meta
-from pirl.agents.methods import BUILTIN
+from pirl.agents.loading import load_policy
+from pirl.agents.methods import ADVISED, BUILTIN
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
-from pirl.agents.run_folder import folder_contents, lock_folder, release_folder
+from pirl.agents.run_folder import RunFolder, folder_contents, lock_folder, release_folder
 from pirl.config.errors import ConfigError, UserError
 from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
@@ -50,7 +50,7 @@ def collect_states(
     from pirl.advice.student import student_features
     from pirl.env.vcpp_env import VCPPEnv
 
-    env = VCPPEnv(cfg.env.replace(reward="ewri", llm_weight=True))
+    env = VCPPEnv(ADVISED.trains_on(cfg.env))
     rng = np.random.default_rng(seed)
     loaded = [load_policy(p, seed=seed) for p in policies]
     prompts: list[str] = []
@@ -105,7 +105,7 @@ def distill(
     for source in policies:  # before the folder: a wrong --policy leaves nothing behind
         if source not in BUILTIN:
             if Path(source).exists():
-                run_meta(Path(source))
+                RunFolder(Path(source)).finished_meta()
             else:
                 load_policy(source)
     cfg = cfg.with_overrides(pare={"advisor": teacher, "mode": "student"})

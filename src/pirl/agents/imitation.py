@@ -10,7 +10,6 @@ accuracy is written to ``il_stats.json``.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 from pathlib import Path
@@ -18,11 +17,11 @@ from typing import Any
 
 import numpy as np
 import torch
-import yaml
 from sb3_contrib import MaskablePPO
 
-from pirl.agents.methods import IL, PPO_METHODS
+from pirl.agents.methods import IL, PPO_METHODS, method
 from pirl.agents.run_folder import (
+    RunFolder,
     git_commit,
     prepare_run_folder,
     train_seed_base,
@@ -38,19 +37,19 @@ TABNET_FILE = "tabnet.zip"
 def load_expert(expert_run: Path) -> Any:
     """The expert's PPO model, checked before an IL run folder is made: the run must exist,
     be a finished PPO run and hold a model that loads."""
-    from pirl.agents.loading import PPOPolicy, model_file, run_masked, run_meta
+    from pirl.agents.loading import PPOPolicy
 
-    expert_run = Path(expert_run)
-    if not expert_run.is_dir():
+    expert = RunFolder(Path(expert_run))
+    if not expert.path.is_dir():
         raise UserError(f"--expert {expert_run}: no such run folder")
-    method = run_meta(expert_run)["method"]
+    method = expert.method
     if method not in PPO_METHODS:
         raise UserError(
             f"--expert {expert_run} is a {method} run, not a finished PPO run "
             f"({', '.join(PPO_METHODS)})"
         )
     IL.check_expert(str(expert_run), method)
-    return PPOPolicy(model_file(expert_run), method, masked=run_masked(expert_run)).model
+    return PPOPolicy(expert.model_file(), method, masked=expert.masked).model
 
 
 def collect_expert(
@@ -60,7 +59,9 @@ def collect_expert(
     deterministically on the training world (on the valid actions, when it trained masked)."""
     model = load_expert(expert_run) if isinstance(expert_run, str | Path) else expert_run
     venv = make_vec_env(
-        cfg.ppo.n_envs, seed=train_seed_base(seed) + 500, config=cfg.env.replace(reward="ewri")
+        cfg.ppo.n_envs,
+        seed=train_seed_base(seed) + 500,
+        config=method(IL.expert).trains_on(cfg.env),
     )
     masked = isinstance(model, MaskablePPO)
     obs = venv.reset()
@@ -76,27 +77,6 @@ def collect_expert(
     return np.concatenate(xs)[:transitions], np.concatenate(ys)[:transitions]
 
 
-def _check_resume(out: Path, seed: int) -> None:
-    """``--resume`` continues the IL run in ``out``: another method or seed is refused."""
-    meta_path = out / "meta.json"
-    if not meta_path.is_file():
-        return  # stopped before it was recorded: nothing to contradict
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"--resume: {meta_path} is damaged ({exc})") from None
-    if meta.get("method") != IL.name:
-        raise UserError(
-            f"--resume: {out} is a {meta.get('method')} run; this command asks for "
-            f"--method {IL.name}"
-        )
-    if meta.get("seed") != seed:
-        raise UserError(
-            f"--resume: {out} was trained with seed {meta.get('seed')}; this command gives "
-            f"--seed {seed}"
-        )
-
-
 def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: bool = False) -> Path:
     """Collect expert data, fit TabNet, save it in run folder ``out``; returns the model file."""
     from pytorch_tabnet.tab_model import TabNetClassifier
@@ -105,8 +85,9 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
 
     _quiet.install()  # TabNet's "Device used" and "Best weights" warnings
     out, expert = Path(out), Path(expert)
+    run = RunFolder(out)
     if resume:
-        _check_resume(out, seed)
+        run.check_resumes(IL.name, seed)
     if resume and (out / TABNET_FILE).is_file():
         return out / TABNET_FILE
     expert_model = load_expert(expert)  # before the run folder exists
@@ -115,7 +96,7 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     else:
         prepare_run_folder(out, resume=False)
     torch.set_num_threads(cfg.ppo.torch_threads)
-    (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    run.write_config(cfg)
     il = cfg.il
     x, y = collect_expert(expert_model, cfg, il.expert_steps, seed)
     order = np.random.default_rng(seed).permutation(len(x))
@@ -154,8 +135,7 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
         "expert": str(expert),
     }
     write_json(out / "il_stats.json", stats)
-    write_json(
-        out / "meta.json",
+    run.write_meta(
         {
             "method": IL.name,
             "seed": seed,

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, method, trained_method
+from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, trained_method
 from pirl.agents.policy import Policy, RandomPolicy
+from pirl.agents.run_folder import RETRAIN, RunFolder, short_error
 from pirl.config.errors import ConfigError, UserError
 
 ACT_MODES = ("stochastic", "greedy")
@@ -150,7 +151,9 @@ class TabNetPolicy(LearnedPolicy):
         try:
             self.model.load_model(str(model_path))
         except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
-            raise UserError(f"{model_path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+            raise UserError(
+                f"{model_path} cannot be loaded ({short_error(exc)}); {RETRAIN}"
+            ) from None
         self.obs_size = int(getattr(self.model, "input_dim", 0) or 0) or None
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
@@ -177,7 +180,7 @@ def check_tabnet_file(path: Path) -> None:
             pickles = [n for n in weights.namelist() if n.endswith(".pkl")]
             names = set().union(*(pickle_globals(weights.read(n)) for n in pickles))
     except (zipfile.BadZipFile, KeyError, OSError) as exc:
-        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+        raise UserError(f"{path} cannot be loaded ({short_error(exc)}); {RETRAIN}") from None
     strange = sorted(n for n in names if not n.startswith("torch.") and n != _ORDERED_DICT)
     if strange:
         raise UnsafeFile(
@@ -187,49 +190,6 @@ def check_tabnet_file(path: Path) -> None:
 
 
 _ORDERED_DICT = "collections.OrderedDict"
-_RETRAIN = "train the run again into a new --out (or restore the file from a copy)"
-
-
-def _short(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0][:160] if text else type(exc).__name__
-
-
-def run_meta(run: Path) -> dict[str, Any]:
-    """The meta.json of a finished run folder."""
-    meta_path = Path(run) / "meta.json"
-    if not meta_path.is_file():
-        raise ConfigError(f"{run} is not a run folder (no meta.json)")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (ValueError, OSError) as exc:
-        raise UserError(f"{meta_path} is damaged ({_short(exc)}); {_RETRAIN}") from None
-    if not isinstance(meta, dict) or "method" not in meta:
-        raise UserError(f"{meta_path} names no method; {_RETRAIN}")
-    if not meta.get("complete"):
-        raise ConfigError(f"run {run} is not finished; continue it with --resume")
-    return meta
-
-
-def run_method(run: Path) -> str:
-    """The method a finished run folder holds (from its meta.json)."""
-    return str(run_meta(run)["method"])
-
-
-def model_file(run: Path) -> Path:
-    """The model file of a finished run, checked to be a whole zip archive (cheap: no torch)."""
-    run = Path(run)
-    path = run / method(run_method(run)).artifact
-    if not path.is_file():
-        raise UserError(f"run {run} has no {path.name}; {_RETRAIN}")
-    try:
-        with zipfile.ZipFile(path) as archive:
-            bad = archive.testzip()
-    except (zipfile.BadZipFile, OSError, EOFError) as exc:
-        raise UserError(f"{path} is damaged ({_short(exc)}); {_RETRAIN}") from None
-    if bad is not None:
-        raise UserError(f"{path} is damaged (member {bad} fails its checksum); {_RETRAIN}")
-    return path
 
 
 def load_policy(
@@ -264,9 +224,8 @@ def load_policy(
     run = Path(source)
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")
-    name = run_method(run)
-    model = model_file(run)
-    masked = run_masked(run)
+    folder = RunFolder(run)
+    name, model, masked = folder.method, folder.model_file(), folder.masked
     if trained_method(name, f"run {run}").training == TRAIN_IMITATION:
         return TabNetPolicy(model, name, masked).set_act(act)
     return PPOPolicy(model, name, device, masked).set_act(act)
@@ -278,7 +237,7 @@ def load_model(path: Path, device: str = "cpu") -> Any:
     from stable_baselines3 import PPO
 
     algo: Any = PPO
-    if run_masked(Path(path).parent):
+    if RunFolder(Path(path).parent).masked:
         from sb3_contrib import MaskablePPO
 
         algo = MaskablePPO
@@ -328,9 +287,9 @@ def sb3_entries(path: Path) -> dict[str, Any]:
         with zipfile.ZipFile(path) as archive:
             data = json.loads(archive.read("data"))
     except (zipfile.BadZipFile, KeyError, OSError, ValueError) as exc:
-        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
+        raise UserError(f"{path} cannot be loaded ({short_error(exc)}); {RETRAIN}") from None
     if not isinstance(data, dict):
-        raise UserError(f"{path} cannot be loaded (its data entry is not a mapping); {_RETRAIN}")
+        raise UserError(f"{path} cannot be loaded (its data entry is not a mapping); {RETRAIN}")
     for key, value in data.items():
         if not (isinstance(value, dict) and ":serialized:" in value):
             continue
@@ -359,17 +318,15 @@ def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:
     import gymnasium as gym
 
     from pirl.agents.schedules import learning_rate_of
-    from pirl.config.run import RunConfig
     from pirl.env.observation import obs_size_for
     from pirl.world.dynamics import N_ACTIONS
 
     path = Path(path)
     data = sb3_entries(path)
-    cfg_path = path.parent / "config.yaml"
     try:
-        cfg = RunConfig.from_yaml(cfg_path)
+        cfg = RunFolder(path.parent).config
     except ConfigError as exc:
-        raise UserError(f"{path} cannot be loaded: its run's {exc}; {_RETRAIN}") from None
+        raise UserError(f"{path} cannot be loaded: {exc}; {RETRAIN}") from None
     policy = algo.policy_aliases["MlpPolicy"]
     rebuilt: dict[str, Any] = {
         "policy_class": policy,
@@ -387,16 +344,4 @@ def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:
     try:
         return algo.load(path, device=device, custom_objects=custom)
     except Exception as exc:  # noqa: BLE001 - any failure to read the file is reported
-        raise UserError(f"{path} cannot be loaded ({_short(exc)}); {_RETRAIN}") from None
-
-
-def run_masked(run: Path) -> bool:
-    """Whether a finished run trained with valid-action masks (its own config.yaml says;
-    runs made before masking existed did not)."""
-    import yaml
-
-    try:
-        cfg = yaml.safe_load((Path(run) / "config.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        return False
-    return bool((cfg.get("ppo") or {}).get("action_masking", False))
+        raise UserError(f"{path} cannot be loaded ({short_error(exc)}); {RETRAIN}") from None

@@ -15,9 +15,13 @@ that trains like an existing one is one entry here.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
 from pirl.config.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pirl.config.world import VCPPConfig
 
 TRAIN_PPO = "ppo"
 """``training`` of a method trained by :func:`pirl.agents.train.train` (SB3 PPO)."""
@@ -87,6 +91,11 @@ class Method:
         """Imitation: the run folder of the expert it learns from."""
         return method(self.expert).folder(seed)
 
+    def trains_on(self, env: VCPPConfig) -> VCPPConfig:
+        """``env`` as this PPO method trains and is judged on it: its reward weights, and the
+        LLM weight switched on for an advised method."""
+        return env.replace(reward=self.reward, llm_weight=self.advised)
+
 
 METHODS: dict[str, Method] = {
     m.name: m
@@ -111,6 +120,9 @@ METHODS: dict[str, Method] = {
 
 IL = METHODS["il"]
 """The imitation baseline, for its own trainer (:mod:`pirl.agents.imitation`)."""
+ADVISED = next(m for m in METHODS.values() if m.advised)
+"""The advised method (PIRL): the env its advisor, teacher and student are asked about is
+``ADVISED.trains_on(env)``."""
 
 TRAINED = tuple(m.name for m in METHODS.values() if m.training != PLAYED)
 """Methods that train into a run folder."""
@@ -183,6 +195,7 @@ def report_order(key: str) -> tuple[int, str]:
 
 
 __all__ = [
+    "ADVISED",
     "BUILTIN",
     "IL",
     "METHODS",

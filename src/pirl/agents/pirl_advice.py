@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.registry import find_advisor_kind
+from pirl.agents.methods import ADVISED
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 
@@ -88,7 +89,7 @@ def build_pirl_advice(
     from pirl.advice.factory import make_advisor
     from pirl.advice.health import probe as probe_call
 
-    env_cfg = cfg.env.replace(reward="ewri", llm_weight=True)
+    env_cfg = ADVISED.trains_on(cfg.env)
     if advisor is None:
         advisor = make_advisor(cfg.pare.advisor, cfg, process=cfg.advisor.local_process)
     if probe:

@@ -1,7 +1,9 @@
-"""Run folders: creating one without overwriting, resuming, and the small files they hold.
+"""Run folders: what a run writes, the one reader of those files, creating one without
+overwriting, resuming, and the lock that keeps one writer per folder.
 
-Shared by every trained method (PPO in :mod:`pirl.agents.train`, TabNet in
-:mod:`pirl.agents.imitation`) and by ``pirl reproduce``.
+:class:`RunFolder` is the only code that knows a run's layout; training (PPO in
+:mod:`pirl.agents.train`, TabNet in :mod:`pirl.agents.imitation`), loading, evaluation and
+``pirl reproduce`` all read and write a run through it.
 """
 
 from __future__ import annotations
@@ -12,12 +14,19 @@ import json
 import os
 import shutil
 import subprocess
+import zipfile
 from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from pirl.agents import checkpoint
-from pirl.config.errors import ConfigError
+from pirl.agents.methods import METHODS
+from pirl.agents.methods import method as method_entry
+from pirl.config.errors import ConfigError, UserError
+from pirl.config.run import RunConfig
 
 
 def train_seed_base(seed: int) -> int:
@@ -184,3 +193,253 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
     os.replace(tmp, path)
+
+
+_RESUME_STOP = "; resume takes the run's own settings (leave the option out) or choose a new --out"
+RETRAIN = "train the run again into a new --out (or restore the file from a copy)"
+"""What a message about a damaged run file tells the user to do."""
+
+
+def short_error(exc: BaseException) -> str:
+    """The first line of an exception's message, at most 160 characters."""
+    text = str(exc).strip().splitlines()
+    return text[0][:160] if text else type(exc).__name__
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """One training run's folder, and the only reader and writer of its files.
+
+    Layout:
+
+    - ``config.yaml``: the resolved :class:`~pirl.config.run.RunConfig` the run trains with
+      (the env section as the method trains on it);
+    - ``meta.json``: method, label, seed, git commit, advisor label, ``complete``,
+      ``total_steps`` (whole rollouts) and, once complete, ``timesteps``;
+    - ``episodes.csv``: one row per finished training episode;
+    - ``advisor_stats.json``: an advised run's PARE and advisor counts;
+    - the method's artifact (``model.zip``, or ``tabnet.zip`` for imitation);
+    - ``checkpoints/`` and ``tb/`` (TensorBoard).
+
+    Reading never caches: a run that is still training is read as it is now.
+    """
+
+    path: Path
+
+    CONFIG = "config.yaml"
+    META = "meta.json"
+    EPISODES = "episodes.csv"
+    ADVISOR_STATS = "advisor_stats.json"
+    CHECKPOINTS = "checkpoints"
+    TENSORBOARD = "tb"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "path", Path(self.path))
+
+    # -- layout ---------------------------------------------------------------------------
+    @property
+    def config_file(self) -> Path:
+        return self.path / self.CONFIG
+
+    @property
+    def meta_file(self) -> Path:
+        return self.path / self.META
+
+    @property
+    def episodes_file(self) -> Path:
+        return self.path / self.EPISODES
+
+    @property
+    def advisor_stats_file(self) -> Path:
+        return self.path / self.ADVISOR_STATS
+
+    @property
+    def checkpoints(self) -> Path:
+        return self.path / self.CHECKPOINTS
+
+    @property
+    def tensorboard(self) -> Path:
+        return self.path / self.TENSORBOARD
+
+    # -- reading --------------------------------------------------------------------------
+    @property
+    def meta(self) -> dict[str, Any]:
+        """``meta.json`` ({} while the run has not recorded one); a damaged file is a
+        :class:`UserError`."""
+        if not self.meta_file.is_file():
+            return {}
+        try:
+            meta = json.loads(self.meta_file.read_text())
+        except (ValueError, OSError) as exc:
+            raise UserError(
+                f"{self.meta_file} is damaged ({short_error(exc)}); {RETRAIN}"
+            ) from None
+        if not isinstance(meta, dict):
+            raise UserError(f"{self.meta_file} is damaged (not a mapping); {RETRAIN}")
+        return meta
+
+    def finished_meta(self) -> dict[str, Any]:
+        """``meta.json`` of a finished run; a folder that is not a run, or one still
+        training, is refused in one line."""
+        if not self.meta_file.is_file():
+            raise ConfigError(f"{self.path} is not a run folder (no meta.json)")
+        meta = self.meta
+        if "method" not in meta:
+            raise UserError(f"{self.meta_file} names no method; {RETRAIN}")
+        if not meta.get("complete"):
+            raise ConfigError(f"run {self.path} is not finished; continue it with --resume")
+        return meta
+
+    @property
+    def method(self) -> str:
+        """The method a finished run holds."""
+        return str(self.finished_meta()["method"])
+
+    @property
+    def seed(self) -> int:
+        """The seed the run trains with (0 when it records none or cannot be read)."""
+        try:
+            return int(self.meta.get("seed") or 0)
+        except (UserError, TypeError, ValueError):
+            return 0
+
+    @property
+    def has_config(self) -> bool:
+        return self.config_file.is_file()
+
+    @property
+    def config(self) -> RunConfig:
+        """The run's own config (a missing or invalid file is one-line :class:`ConfigError`)."""
+        try:
+            return RunConfig.from_yaml(self.config_file)
+        except ConfigError as exc:
+            raise UserError(f"run {self.path}: {exc}") from None
+
+    @property
+    def judged_config(self) -> RunConfig:
+        """The run's config as an evaluation of it starts from: the reward it trained with
+        does not change the scenarios, and a run trained on a site is judged on the sizes and
+        sites an evaluation asks for, not on its own."""
+        cfg = self.config
+        env = cfg.env.replace(reward="static", llm_weight=False, site="", ground_cells=0)
+        return replace(cfg, env=env)
+
+    @property
+    def masked(self) -> bool:
+        """Whether the run trains with valid-action masks (False for a run without a config:
+        runs made before masking existed did not)."""
+        return self.has_config and self.config.ppo.action_masking
+
+    @property
+    def advisor(self) -> str:
+        """The advisor the run's config names ("" without a config)."""
+        return self.config.pare.advisor if self.has_config else ""
+
+    @property
+    def advisor_stats(self) -> dict[str, Any] | None:
+        """``advisor_stats.json`` (None when the run wrote none); a damaged file is a
+        :class:`UserError`."""
+        if not self.advisor_stats_file.is_file():
+            return None
+        try:
+            stats = json.loads(self.advisor_stats_file.read_text())
+        except (ValueError, OSError) as exc:
+            raise UserError(
+                f"{self.advisor_stats_file} is damaged ({short_error(exc)}); {RETRAIN}"
+            ) from None
+        if not isinstance(stats, dict):
+            raise UserError(f"{self.advisor_stats_file} is damaged (not a mapping); {RETRAIN}")
+        return stats
+
+    @property
+    def artifact(self) -> Path:
+        """Where the finished policy is (the method's artifact; unchecked)."""
+        return self.path / method_entry(self.method).artifact
+
+    def model_file(self) -> Path:
+        """The policy file of a finished run, checked to be a whole zip archive (cheap: no
+        torch)."""
+        path = self.artifact
+        if not path.is_file():
+            raise UserError(f"run {self.path} has no {path.name}; {RETRAIN}")
+        try:
+            with zipfile.ZipFile(path) as archive:
+                bad = archive.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError) as exc:
+            raise UserError(f"{path} is damaged ({short_error(exc)}); {RETRAIN}") from None
+        if bad is not None:
+            raise UserError(f"{path} is damaged (member {bad} fails its checksum); {RETRAIN}")
+        return path
+
+    def finished_steps(self) -> int | None:
+        """Steps of the finished model, or None while the run is not complete."""
+        try:
+            meta = self.meta
+        except UserError:
+            return None
+        entry = METHODS.get(str(meta.get("method")))
+        if meta.get("complete") and entry and (self.path / entry.artifact).is_file():
+            return int(meta.get("timesteps") or 0)
+        return None
+
+    def state(self) -> str:
+        """'complete', 'resumable', 'broken' (exists, nothing to resume) or 'absent'."""
+        try:
+            complete = bool(self.meta.get("complete"))
+        except UserError:
+            complete = False
+        if complete:
+            return "complete"
+        if checkpoint.latest(self.checkpoints) is not None:
+            return "resumable"
+        return "broken" if self.path.exists() else "absent"
+
+    def file_identity(self) -> tuple:
+        """Path, mtime and size of the policy files: a model trained again into the same
+        folder is a new policy, never a cached old one."""
+        ident = []
+        for name in ("model.zip", "tabnet.zip", self.META):
+            path = self.path / name
+            try:
+                st = path.stat()
+            except OSError:
+                continue
+            ident.append((str(path.resolve()), st.st_mtime_ns, st.st_size))
+        return tuple(ident)
+
+    def episodes(self) -> list[dict[str, float]]:
+        """The rows of ``episodes.csv`` as numbers ([] before the first episode ends)."""
+        import csv
+
+        if not self.episodes_file.is_file():
+            return []
+        with open(self.episodes_file, newline="") as fh:
+            return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+    def check_resumes(self, method: str, seed: int) -> None:
+        """``--resume`` continues this folder's run: a recorded method or seed other than
+        the command's is refused in one line naming both (a :class:`UserError`: the folder, not a
+        config value, is what the command got wrong)."""
+        meta = self.meta
+        if not meta:
+            return  # stopped before it was recorded: nothing to contradict
+        if meta.get("method") != method:
+            raise UserError(
+                f"--resume: {self.path} is a {meta.get('method')} run; this command asks for "
+                f"--method {method}{_RESUME_STOP}"
+            )
+        if meta.get("seed") != seed:
+            raise UserError(
+                f"--resume: {self.path} was trained with seed {meta.get('seed')}; this command "
+                f"gives --seed {seed}{_RESUME_STOP}"
+            )
+
+    # -- writing --------------------------------------------------------------------------
+    def write_config(self, cfg: RunConfig) -> None:
+        self.config_file.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+
+    def write_meta(self, meta: dict[str, Any]) -> None:
+        write_json(self.meta_file, meta)
+
+    def write_advisor_stats(self, stats: dict[str, Any]) -> None:
+        write_json(self.advisor_stats_file, stats)

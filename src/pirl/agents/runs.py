@@ -9,13 +9,13 @@ two modules imports the other.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from pirl.advice.registry import advisor_kind
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, TRAIN_PPO, trained_method
+from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
@@ -60,14 +60,6 @@ def method_config(cfg: RunConfig, method: str) -> RunConfig:
     return (
         cfg if steps == cfg.train.total_steps else cfg.with_overrides(train={"total_steps": steps})
     )
-
-
-def run_seed(out: Path) -> int:
-    """The seed a run folder was trained with (0 when it records none)."""
-    try:
-        return int(json.loads((Path(out) / "meta.json").read_text()).get("seed") or 0)
-    except (OSError, ValueError):
-        return 0
 
 
 def train_one(
@@ -128,13 +120,13 @@ def train_run(
     entry.check_options(expert=expert, advisor=advisor, student=student)
     if seed is not None:
         check_seed(seed)
-    own = Path(out) / "config.yaml"
-    if resume and config is None and own.is_file():
-        cfg = RunConfig.from_yaml(own)  # resume continues the run that is in the folder
+    own = RunFolder(Path(out))
+    if resume and config is None and own.has_config:
+        cfg = own.config  # resume continues the run that is in the folder
     else:
         cfg = RunConfig.from_yaml(config or default_config)
     if seed is None:
-        seed = run_seed(out) if resume else 0
+        seed = own.seed if resume else 0
     cfg = method_config(cfg, method)
     if steps is not None:
         cfg = cfg.with_overrides(train={"total_steps": steps})
@@ -168,4 +160,4 @@ def train_run(
     return train(method, cfg, out, seed=seed, resume=resume, student=None if resume else student)
 
 
-__all__ = ["check_layouts", "run_seed", "train_one", "train_run"]
+__all__ = ["check_layouts", "train_one", "train_run"]

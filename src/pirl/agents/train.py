@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import os
 import sys
 from dataclasses import dataclass, replace
@@ -24,20 +23,19 @@ from typing import Any
 
 import numpy as np
 import torch
-import yaml
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.agents import checkpoint
-from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, label
-from pirl.agents.methods import method as method_entry
+from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, Method
 from pirl.agents.run_folder import (
+    RunFolder,
     git_commit,
+    lock_folder,
     prepare_run_folder,
     release_folder,
     train_seed_base,
-    write_json,
 )
 from pirl.agents.schedules import learning_rate_of
 from pirl.config.errors import ConfigError
@@ -53,23 +51,27 @@ EPISODE_COLUMNS = (
 )  # fmt: skip
 
 
-def env_config_for(name: str, cfg: RunConfig) -> VCPPConfig:
-    """The environment a PPO method is trained and judged on: its entry's reward weights (static
-    for PPO-SR, EWRI otherwise), and the LLM weight switched on for an advised method (PIRL).
-    Its episodes start at the env's camera pose; see :func:`training_env_config`."""
+def ppo_method(name: str) -> Method:
+    """The entry of a PPO method; one line naming the PPO methods for any other name."""
     entry = METHODS.get(name)
     if entry is None or entry.training != TRAIN_PPO:
         raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
-    return cfg.env.replace(reward=entry.reward, llm_weight=entry.advised)
+    return entry
 
 
-def training_env_config(name: str, cfg: RunConfig) -> VCPPConfig:
-    """:func:`env_config_for` with ``train.camera_start`` applied: exploring starts are a way
-    of training, so they stay out of the env that config.yaml records and evaluations build."""
-    return env_config_for(name, cfg).replace(start_camera=cfg.train.camera_start)
+def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
+    """``cfg`` with the env the method trains and is judged on (its reward weights, the LLM
+    weight for an advised method): what config.yaml records and evaluations rebuild."""
+    return replace(cfg, env=ppo_method(method).trains_on(cfg.env))
 
 
-# -- 1. run folder: prepare_run_folder (pirl.agents.run_folder), check_resume ----------------
+def training_env(cfg: RunConfig) -> VCPPConfig:
+    """The resolved env with ``train.camera_start`` applied: exploring starts are a way of
+    training, so they stay out of the env that config.yaml records and evaluations build."""
+    return cfg.env.replace(start_camera=cfg.train.camera_start)
+
+
+# -- 1. settling the run: resolved_config, check_resume --------------------------------------
 # Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
 # `pirl reproduce` does around it, how the physics simulator evaluates it and the memory limit
 # of its worlds (env.max_memory_gb, a property of the machine). Everything else
@@ -77,75 +79,44 @@ def training_env_config(name: str, cfg: RunConfig) -> VCPPConfig:
 RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.", "env.max_memory_gb")
 
 
-def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
-    """``cfg`` with the environment the method really trains on (what config.yaml records)."""
-    return replace(cfg, env=env_config_for(method, cfg))
+def check_resume(run: RunFolder, method: str, cfg: RunConfig, seed: int, log: Any) -> RunConfig:
+    """Before anything is built: the run in ``run`` must be the one this command describes.
 
-
-def check_resume(out: Path, method: str, cfg: RunConfig, seed: int, log: Any = print) -> RunConfig:
-    """Before anything is built: the run in ``out`` must be the one this command describes.
-
-    Reads the run's own ``meta.json`` and ``config.yaml``; a different method, seed or config
-    value (advisor included) is refused with a message naming both values. A larger
-    ``train.total_steps`` extends the run (said in one line). Returns the config to continue
-    with: the run's own, with this command's ``train`` settings.
+    ``cfg`` is resolved (:func:`resolved_config`), as the run's own config.yaml is. A
+    different method, seed or config value (advisor included) is refused with a message naming
+    both values. A larger ``train.total_steps`` extends the run (said in one line). Returns the
+    config to continue with: the run's own, with this command's ``train`` settings.
     """
-    out = Path(out)
-    if not out.is_dir():
-        raise ConfigError(f"--resume: run folder {out} does not exist")
-    meta_path, cfg_path = out / "meta.json", out / "config.yaml"
-    if not meta_path.is_file() or not cfg_path.is_file():
-        if checkpoint.latest(out / "checkpoints") is None and not (out / "model.zip").exists():
+    if not run.path.is_dir():
+        raise ConfigError(f"--resume: run folder {run.path} does not exist")
+    if not run.meta_file.is_file() or not run.has_config:
+        if checkpoint.latest(run.checkpoints) is None and not (run.path / "model.zip").exists():
             return cfg  # stopped before the run was recorded: nothing to continue, start it
-        raise ConfigError(f"--resume: {out} is not a run folder (no meta.json or config.yaml)")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"--resume: {meta_path} is damaged ({exc})") from None
-    stop = "; resume takes the run's own settings (leave the option out) or choose a new --out"
-    if meta.get("method") != method:
-        raise ConfigError(
-            f"--resume: {out} is a {meta.get('method')} run; this command asks for "
-            f"--method {method}{stop}"
-        )
-    if meta.get("seed") != seed:
-        raise ConfigError(
-            f"--resume: {out} was trained with seed {meta.get('seed')}; this command gives "
-            f"--seed {seed}{stop}"
-        )
-    saved = resolved_config(method, RunConfig.from_yaml(cfg_path))
-    wanted = resolved_config(method, cfg)
-    old, new = _flat(saved.to_dict()), _flat(wanted.to_dict())
-    unused = () if method_entry(method).advised else ("pare.", "advisor.")
+        raise ConfigError(f"--resume: {run.path} is not a run folder (no meta.json or config.yaml)")
+    run.check_resumes(method, seed)
+    saved = run.config
+    old, new = _flat(saved.to_dict()), _flat(cfg.to_dict())
+    unused = () if ppo_method(method).advised else ("pare.", "advisor.")
     free = RESUME_MAY_CHANGE + ("il.", *unused)
     for key in sorted(old.keys() | new.keys()):
         if key.startswith(free) or old.get(key) == new.get(key):
             continue
         raise ConfigError(
-            f"--resume: {out} was trained with {key}={old.get(key)!r}; this command gives "
-            f"{key}={new.get(key)!r}{stop}"
+            f"--resume: {run.path} was trained with {key}={old.get(key)!r}; this command gives "
+            f"{key}={new.get(key)!r}; resume takes the run's own settings (leave the option "
+            "out) or choose a new --out"
         )
     # meta.json records the whole-rollout count that runs; compare like with like.
-    before, after = int(meta.get("total_steps") or 0), whole_steps(saved, cfg.train.total_steps)
+    before = int(run.meta.get("total_steps") or 0)
+    after = whole_steps(saved, cfg.train.total_steps)
     if after > before:
-        log(f"resume: extending {out} from {before:,} to {after:,} steps")
+        log(f"resume: extending {run.path} from {before:,} to {after:,} steps")
     elif after < before:
         raise ConfigError(
-            f"--resume: {out} was set to train {before:,} steps; --steps {after:,} would cut it "
-            "short (give at least that many, or leave --steps out)"
+            f"--resume: {run.path} was set to train {before:,} steps; --steps {after:,} would "
+            "cut it short (give at least that many, or leave --steps out)"
         )
     return replace(saved, train=cfg.train, reproduce=cfg.reproduce)
-
-
-def _finished_steps(out: Path) -> int | None:
-    """Steps of the finished model in ``out``, or None while the run is not complete."""
-    try:
-        meta = json.loads((out / "meta.json").read_text())
-    except (OSError, ValueError):
-        return None
-    if meta.get("complete") and (out / "model.zip").is_file():
-        return int(meta.get("timesteps") or 0)
-    return None
 
 
 def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -168,21 +139,15 @@ class EnvStack:
     pare: Any | None
 
 
-def build_env_stack(
-    method: str, cfg: RunConfig, seed: int, advice: Any | None, source: str = ""
-) -> EnvStack:
-    """make_vec_env -> (PARE for pirl, from a :class:`~pirl.agents.pirl_advice.PirlAdvice`)
-    -> VecMonitor."""
-    venv = make_vec_env(
-        cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env_config(method, cfg)
-    )
+def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str = "") -> EnvStack:
+    """make_vec_env on the resolved config's training env -> (PARE when there is ``advice``,
+    a :class:`~pirl.agents.pirl_advice.PirlAdvice`) -> VecMonitor."""
+    venv = make_vec_env(cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env(cfg))
     pare = None
     inner = venv
-    if method_entry(method).advised:
+    if advice is not None:
         from pirl.pare.vec_env import PAREVecEnv
 
-        if advice is None:
-            raise ConfigError("pirl needs an advisor")
         pare = PAREVecEnv.from_settings(
             venv, cfg.pare, advice, refit_every=cfg.ppo.n_steps, seed=seed, source=source
         )
@@ -245,7 +210,7 @@ class RunCallback(BaseCallback):
         self.progress = progress
         self.snapshot: dict | None = None
         self.next_checkpoint = 0
-        self.csv_path = out / "episodes.csv"
+        self.csv_path = RunFolder(out).episodes_file
         self.csv_rows = csv_rows
         self._terms_sum = np.zeros(len(REWARD_TERMS))
         self._terms_n = 0
@@ -369,108 +334,118 @@ def train(
     from pirl import _quiet
 
     _quiet.install()
-    out = Path(out)
+    run = RunFolder(Path(out))
     log = print if show_progress else (lambda _m: None)
-    env_config_for(method, cfg)  # validates the method before touching the disk
+    entry = ppo_method(method)  # refused before the disk is touched
+    # The one place the config is settled: the method's env, or a resumed run's own config.
+    cfg = resolved_config(method, cfg)
     if resume:
-        from pirl.agents.run_folder import lock_folder
-
-        if out.is_dir():
-            lock_folder(out)  # first: a second writer is refused before it reads anything
-        cfg = check_resume(out, method, cfg, seed, log)
-        done = _finished_steps(out)
+        if run.path.is_dir():
+            lock_folder(run.path)  # first: a second writer is refused before it reads anything
+        cfg = check_resume(run, method, cfg, seed, log)
+        done = run.finished_steps()
         if done is not None and done >= cfg.train.total_steps:
             log(f"{out} is already complete ({done:,} steps); give a larger --steps to extend it")
-            return out / "model.zip"
-    cfg = resolved_config(method, cfg)  # config.yaml records what really trains
-    rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
-    if cfg.train.total_steps % rollout:
-        whole = -(-cfg.train.total_steps // rollout) * rollout
+            return run.path / "model.zip"
+    total = whole_steps(cfg, cfg.train.total_steps)
+    if total != cfg.train.total_steps:
         log(
-            f"note: PPO trains whole rollouts of n_envs x n_steps = {rollout:,} steps, so "
-            f"{cfg.train.total_steps:,} steps become {whole:,}"
+            f"note: PPO trains whole rollouts of n_envs x n_steps = "
+            f"{cfg.ppo.n_envs * cfg.ppo.n_steps:,} steps, so {cfg.train.total_steps:,} steps "
+            f"become {total:,}"
         )
+
+    # 1. the advice (PIRL): built and probed before the folder exists, so a dead server or a
+    #    wrong student leaves nothing behind.
     advice = None
-    if method_entry(method).advised:
+    if entry.advised:
         from pirl.agents.pirl_advice import build_pirl_advice
 
-        # Before the folder exists: a dead server or a wrong student leaves nothing behind.
         advice = build_pirl_advice(
-            cfg, advisor, student, probe=True, seed=seed, log=_warn, run=str(out.resolve())
+            cfg, advisor, student, probe=True, seed=seed, log=_warn, run=str(run.path.resolve())
         )
         advisor = advice.advisor
-    found = prepare_run_folder(out, resume, log)
-    ckpt = found[0] if found is not None else None
-    if ckpt is None and advice is not None and cfg.pare.student_dataset_scope == "run":
+
+    # 2. the run folder: new (config.yaml and meta.json record the run) or resumed.
+    found = prepare_run_folder(run.path, resume, log)
+    if found is None and advice is not None and cfg.pare.student_dataset_scope == "run":
         advice.drop_own_answers()  # an earlier run of this folder must not teach this one
-    torch.set_num_threads(cfg.ppo.torch_threads)
     meta = {
         "method": method,
-        "label": advice.label if advice is not None else label(method),
+        "label": advice.label if advice is not None else entry.label,
         "seed": seed,
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
         "complete": False,
-        "total_steps": whole_steps(cfg, cfg.train.total_steps),  # the steps that run
+        "total_steps": total,
     }
     if student is not None:
         meta["student_from"] = str(student)
-    if ckpt is None:
-        (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-        write_json(out / "meta.json", meta)
-    stack = build_env_stack(method, cfg, seed, advice, source=str(out.resolve()))
-    model = build_ppo(stack.env, cfg, seed, out / "tb")
+    if found is None:
+        run.write_config(cfg)
+        run.write_meta(meta)
+
+    # 3. the env stack and the model (restored from the checkpoint when resuming).
+    torch.set_num_threads(cfg.ppo.torch_threads)
+    stack = build_env_stack(cfg, seed, advice, source=str(run.path.resolve()))
+    model = build_ppo(stack.env, cfg, seed, run.tensorboard)
     csv_rows = 0
     if found is not None:
-        state = found[1]
-        checkpoint.restore(state, model, stack.env, stack.venv, stack.pare)
-        csv_rows = state.get("csv_rows", 0)
-    total = cfg.train.total_steps
+        checkpoint.restore(found[1], model, stack.env, stack.venv, stack.pare)
+        csv_rows = found[1].get("csv_rows", 0)
     progress = Progress(
-        method, total, every_s=cfg.train.log_every_s, enabled=show_progress, rate_unit="fps"
+        method,
+        cfg.train.total_steps,
+        every_s=cfg.train.log_every_s,
+        enabled=show_progress,
+        rate_unit="fps",
     )
-    callback = RunCallback(out, stack, cfg, total, progress, csv_rows)
-    remaining = max(0, total - model.num_timesteps)
+    callback = RunCallback(run.path, stack, cfg, cfg.train.total_steps, progress, csv_rows)
+
+    # 4. learn; every way out closes the envs and gives the folder's lock back.
     try:
+        remaining = max(0, cfg.train.total_steps - model.num_timesteps)
         if remaining:
             model.learn(
                 total_timesteps=remaining,
                 callback=callback,
-                reset_num_timesteps=ckpt is None,
+                reset_num_timesteps=found is None,
                 tb_log_name="ppo",
             )
+        progress.close()
+        return _finish(run, model, stack, advisor, cfg, meta)
     except KeyboardInterrupt:
         progress.close()
-        saved = callback.save_snapshot()
-        stack.env.close()
-        release_folder(out)  # the caller may resume it, in this process or another
-        raise TrainingInterrupted(saved) from None
+        raise TrainingInterrupted(callback.save_snapshot()) from None
     except AdvisorFailing as failing:
         progress.close()
         saved = callback.save_snapshot()
         if stack.pare is not None:
-            write_json(out / "advisor_stats.json", _advisor_stats(stack.pare, advisor))
-        stack.env.close()
-        release_folder(out)
+            run.write_advisor_stats(_advisor_stats(stack.pare, advisor))
         raise TrainingStopped(str(failing), saved) from None
-    progress.close()
-    final = out / "model.zip"
-    tmp = out / "model.tmp.zip"
+    finally:
+        stack.env.close()
+        release_folder(run.path)  # the caller may resume it, in this process or another
+
+
+def _finish(
+    run: RunFolder, model: Any, stack: EnvStack, advisor: Any, cfg: RunConfig, meta: dict
+) -> Path:
+    """Write the final model (atomically), the advisor's statistics, and mark the run
+    complete; a mostly unshaped PIRL run is PPO-EWRI under PIRL's name, so it says so."""
+    final = run.path / "model.zip"
+    tmp = run.path / "model.tmp.zip"
     model.save(tmp)
     os.replace(tmp, final)
     if stack.pare is not None:
         from pirl.agents.pirl_advice import unshaped_warning
 
         stats = _advisor_stats(stack.pare, advisor)
-        write_json(out / "advisor_stats.json", stats)
-        # A mostly unshaped PIRL run is PPO-EWRI under PIRL's name: say so, and why.
+        run.write_advisor_stats(stats)
         warning = unshaped_warning(stats, cfg.pare.min_shaped, cfg.pare.gate()[0])
         if warning:
             _warn(warning)
-    meta.update(complete=True, timesteps=int(model.num_timesteps))
-    write_json(out / "meta.json", meta)
-    stack.env.close()
-    release_folder(out)
+    run.write_meta({**meta, "complete": True, "timesteps": int(model.num_timesteps)})
     return final
 
 

@@ -112,6 +112,7 @@ def score_states(cfg: RunConfig, n: int, seed: int = 0) -> list[WorldView]:
     """``n`` frozen world states from planner and random rollouts (episodes alternate) on the
     validation scenarios of :data:`SCORE_SIZES`, the same for every advisor."""
     from pirl.agents.loading import load_policy
+    from pirl.agents.methods import ADVISED
     from pirl.env.vcpp_env import VCPPEnv
 
     if n < 1:
@@ -120,7 +121,7 @@ def score_states(cfg: RunConfig, n: int, seed: int = 0) -> list[WorldView]:
     rng = np.random.default_rng([seed, 0xAD1CE])
     for k, size in enumerate(SCORE_SIZES):
         want = n // len(SCORE_SIZES) + (1 if k < n % len(SCORE_SIZES) else 0)
-        env = VCPPEnv(cfg.env.replace(size=size, reward="ewri", llm_weight=False))
+        env = VCPPEnv(ADVISED.trains_on(cfg.env.replace(size=size)))
         policies = [load_policy("boustrophedon"), load_policy("random", seed=seed)]
         got = 0
         for episode, scenario in enumerate(validation_seeds(size, 10_000)):

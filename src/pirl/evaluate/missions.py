@@ -489,28 +489,26 @@ def mission_source(
     if (policy is None) == (method is None):
         raise ConfigError("give --policy runs/NAME or --method boustrophedon (one of them)")
     from pirl.agents.loading import load_policy
+    from pirl.agents.methods import PLAYED_ALONE
 
     if policy is not None:
-        from pirl.config.run import RunConfig
+        from pirl.agents.run_folder import RunFolder
         from pirl.evaluate.runner import run_label
 
-        policy = Path(policy)
-        if not (policy / "model.zip").is_file() or not (policy / "config.yaml").is_file():
+        run = RunFolder(Path(policy))
+        if not (run.path / "model.zip").is_file() or not run.has_config:
             raise ConfigError(
                 f"--policy {policy}: not a finished run (no model.zip and config.yaml)"
             )
         if act not in ("greedy", "stochastic"):
             raise ConfigError(f"--act {act!r}: allowed values are greedy, stochastic")
-        env = RunConfig.from_yaml(policy / "config.yaml").env.replace(
-            site="", ground_cells=0, reward="static", llm_weight=False
-        )
-        chosen = load_policy(policy, seed=seed, act=act)
-        meta = policy / "meta.json"
-        name = run_label(json.loads(meta.read_text())) if meta.is_file() else policy.name
-        what = f"{name} (run {policy.name}, act {act})"
+        env = run.judged_config.env
+        chosen = load_policy(run.path, seed=seed, act=act)
+        name = run_label(run.meta) if run.meta else run.path.name
+        what = f"{name} (run {run.path.name}, act {act})"
     else:
-        if method not in ("boustrophedon", "random"):
-            raise ConfigError(f"--method {method!r}: allowed values are boustrophedon, random")
+        if method not in PLAYED_ALONE:
+            raise ConfigError(f"--method {method!r}: allowed values are {', '.join(PLAYED_ALONE)}")
         chosen = load_policy(str(method), seed=seed)
         what = str(getattr(chosen, "label", method))
     if site is not None:

@@ -25,8 +25,9 @@ from typing import Any
 
 from pirl import _quiet
 from pirl.advice.registry import DEFAULT_ADVISOR, builtin_of_label, find_advisor_kind
-from pirl.agents.loading import ACT_MODES, BUILTIN, check_act, model_file, run_meta
+from pirl.agents.loading import ACT_MODES, BUILTIN, check_act
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_advised_key, label
+from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
@@ -77,24 +78,14 @@ def spec_for_run(run: Path) -> MethodSpec:
     """The spec of a finished run, labelled by :func:`run_label`; an advised run whose advisor
     is not an LLM (PIRL with the oracle) has its own key. Runs sharing a key but not a label
     are told apart by :func:`evaluate`."""
-    meta = run_meta(Path(run))
-    model_file(Path(run))  # a missing or damaged model is reported here, before any work
+    folder = RunFolder(run)
+    meta = folder.finished_meta()
+    folder.model_file()  # a missing or damaged model is reported here, before any work
     method = str(meta["method"])
     entry = METHODS.get(method)
     advised = entry is not None and entry.advised
-    key = advised_key(method, _run_advisor(Path(run))) if advised else method
+    key = advised_key(method, folder.advisor) if advised else method
     return MethodSpec(key, run_label(meta), str(run), meta.get("seed"), None)
-
-
-def _run_advisor(run: Path) -> str:
-    """The advisor a run's config.yaml names (empty when it names none)."""
-    import yaml
-
-    try:
-        data = yaml.safe_load((run / "config.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        return ""
-    return str((data.get("pare") or {}).get("advisor") or "")
 
 
 def spec_for_builtin(name: str, advisor: str | None = None, max_calls: int = 0) -> MethodSpec:
@@ -145,19 +136,8 @@ _POLICIES: dict[tuple, Any] = {}
 
 
 def _file_identity(source: str) -> tuple:
-    """Path, mtime and size of a run's model files: a model retrained into the same folder is
-    a new policy, never the cached old one."""
-    if source in BUILTIN:
-        return ()
-    ident = []
-    for name in ("model.zip", "tabnet.zip", "meta.json"):
-        path = Path(source) / name
-        try:
-            st = path.stat()
-        except OSError:
-            continue
-        ident.append((str(path.resolve()), st.st_mtime_ns, st.st_size))
-    return tuple(ident)
+    """A run's policy files as they are now (see :meth:`RunFolder.file_identity`)."""
+    return () if source in BUILTIN else RunFolder(Path(source)).file_identity()
 
 
 def _policy(spec: MethodSpec, config: RunConfig) -> Any:
@@ -431,20 +411,18 @@ def _slug(label: str) -> str:
 def _config_difference(a: Path, b: Path, method: str) -> tuple[str, Any, Any] | None:
     """The first setting (section.key) in which two runs' config.yaml differ, seed aside and
     sections the method does not use (PARE and the advisor outside PIRL) aside."""
-    import yaml
-
     entry = METHODS.get(method)
     unused = () if is_advised_key(method) else ("pare.", "advisor.")
     unused += ("train.",) if entry is not None and entry.training == TRAIN_IMITATION else ("il.",)
 
     def flat(run: Path) -> dict[str, Any]:
-        path = run / "config.yaml"
-        data = yaml.safe_load(path.read_text()) if path.is_file() else {}
-        out: dict[str, Any] = {}
-        for section, values in (data or {}).items():
-            for key, value in (values or {}).items() if isinstance(values, dict) else []:
-                out[f"{section}.{key}"] = value
-        return out
+        folder = RunFolder(run)
+        data = folder.config.to_dict() if folder.has_config else {}
+        return {
+            f"{section}.{key}": value
+            for section, values in data.items()
+            for key, value in (values.items() if isinstance(values, dict) else ())
+        }
 
     fa, fb = flat(a), flat(b)
     for key in sorted(fa.keys() | fb.keys()):
@@ -463,19 +441,15 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
 
 def _check_observations(plan: EvalPlan) -> None:
     """A trained policy needs the observation layout it was trained with."""
-    import yaml
-
     for spec in plan.specs:
-        if spec.source in BUILTIN:
+        folder = RunFolder(Path(spec.source))
+        if spec.source in BUILTIN or not folder.has_config:
             continue
-        cfg_path = Path(spec.source) / "config.yaml"
-        if not cfg_path.is_file():
-            continue
-        trained = (yaml.safe_load(cfg_path.read_text()) or {}).get("env", {})
+        trained = folder.config.env
         for key in ("obs_window", "obs_global", "obs_visits", "obs_target", "obs_target_path"):
-            if trained.get(key, False) != getattr(plan.env, key):
+            if getattr(trained, key) != getattr(plan.env, key):
                 raise ConfigError(
-                    f"{spec.source} was trained with {key}={trained.get(key, False)}, "
+                    f"{spec.source} was trained with {key}={getattr(trained, key)}, "
                     f"the evaluation uses {getattr(plan.env, key)}: evaluate it with its own "
                     "env settings, or train it again (a new --out, or remove that folder)"
                 )
@@ -533,14 +507,8 @@ def evaluate_runs(
         )
     if config is not None:
         cfg = RunConfig.from_yaml(config)
-    elif runs and (runs[0] / "config.yaml").is_file():
-        cfg = RunConfig.from_yaml(runs[0] / "config.yaml")
-        # A run records the reward it trained with; the scenarios do not depend on it.
-        # A run trained on a site is judged on the sizes and sites asked for, not its own.
-        cfg = replace(
-            cfg,
-            env=cfg.env.replace(reward="static", llm_weight=False, site="", ground_cells=0),
-        )
+    elif runs and RunFolder(runs[0]).has_config:
+        cfg = RunFolder(runs[0]).judged_config
     else:
         cfg = RunConfig()
     for r in runs:

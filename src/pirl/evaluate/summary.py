@@ -22,11 +22,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from pirl.config.errors import ConfigError
+from pirl.config.run import PareSettings
+
 log = logging.getLogger(__name__)
 
 HEADLINE = ("vcr", "be", "rvc")
-DEFAULT_MIN_SHAPED = 0.5
-"""``pare.min_shaped`` of runs whose config predates the setting."""
 BOOTSTRAP_REPS = 1000
 POI_REPS = 1000
 OTHER = (
@@ -139,24 +140,20 @@ def _sources(group: list[dict[str, Any]]) -> list[str]:
 
 def _run_shaping(source: str) -> tuple[float, int, int] | None:
     """(pare.min_shaped, steps, unshaped steps) of a PIRL run folder, None for other runs."""
-    import json
+    from pirl.agents.run_folder import RunFolder
 
-    import yaml
-
-    folder = Path(source)
-    stats_path = folder / "advisor_stats.json"
-    if not stats_path.is_file():
-        return None
+    folder = RunFolder(Path(source))
     try:
-        stats = json.loads(stats_path.read_text())
-        cfg = yaml.safe_load((folder / "config.yaml").read_text()) or {}
-    except (OSError, ValueError):
+        record = folder.advisor_stats
+        # A run without a config records no floor: the setting's default stands for it.
+        pare = folder.config.pare if folder.has_config else PareSettings()
+        min_shaped = pare.min_shaped
+    except ConfigError:
         return None
-    steps = int(stats.get("steps") or 0)
-    if steps <= 0:
+    steps = int((record or {}).get("steps") or 0)
+    if record is None or steps <= 0:
         return None
-    unshaped = int(stats.get("steps_unshaped", stats.get("steps_missing", 0)))
-    min_shaped = float((cfg.get("pare") or {}).get("min_shaped", DEFAULT_MIN_SHAPED))
+    unshaped = int(record.get("steps_unshaped", record.get("steps_missing", 0)))
     return min_shaped, steps, unshaped
 
 
