@@ -14,7 +14,7 @@ import yaml
 from pirl.agents.runs import method_steps, train_one, train_run
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.evaluate.reproduce import describe_plan, plan_runs, steps_text
+from pirl.evaluate.plan import check_reproduce, make_plan, plan_runs, steps_text
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST = ROOT / "configs" / "test.yaml"
@@ -51,13 +51,17 @@ def test_the_plan_and_the_report_name_each_budget(tmp_path):
     assert steps_text(study.with_overrides(train={"steps_by_method": {}})) == (
         f"{study.train.total_steps:,} steps"
     )
-    line = next(x for x in describe_plan(own, "oracle", tmp_path, 2, 2) if "training runs" in x)
+
+    def describe_plan(cfg: RunConfig) -> list[str]:
+        return make_plan(check_reproduce(cfg, "oracle", 2), tmp_path).describe()
+
+    line = next(x for x in describe_plan(own) if "training runs" in x)
     assert "409,600 steps (PPO-EWRI 1,638,400)" in line
     # The estimate counts PPO-EWRI's longer runs.
     same = study.with_overrides(train={"total_steps": 409600, "steps_by_method": {}})
     minutes = [
         float(
-            next(x for x in describe_plan(c, "oracle", tmp_path, 2, 2) if "training runs" in x)
+            next(x for x in describe_plan(c) if "training runs" in x)
             .split("about ")[1]
             .split(" min")[0]
         )  # fmt: skip

@@ -85,11 +85,17 @@ def test_report_renders_in_headless_chromium(reproduced, tmp_path):
     assert dom.index("Summary") < dom.index('alt="intervals') < dom.index("<table")
 
 
-def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced):
+def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced, monkeypatch):
+    from pirl.evaluate import plan
+
     cfg, out, report, _ = reproduced
     before = (out / "eval" / "summary.csv").read_text()
     logs: list[str] = []
+    calls: list[object] = []
+    real = plan.plan_runs
+    monkeypatch.setattr(plan, "plan_runs", lambda *args: calls.append(args) or real(*args))
     reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
+    assert len(calls) == 1  # the plan is made once, and everything reads it
     assert sum("already trained" in line for line in logs) == 4
     assert (out / "eval" / "summary.csv").read_text() == before
 
@@ -126,10 +132,18 @@ def test_parallel_training_gives_the_same_models_as_sequential(tmp_path):
     cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
         reproduce={"methods": ["ppo-sr", "ppo-ewri", "il"], "seeds": [0]}
     )
-    logs: list[str] = []
-    seq = train_all(cfg, tmp_path / "seq", "oracle", logs.append, False, workers=1)
-    par = train_all(cfg, tmp_path / "par", "oracle", logs.append, False, workers=2)
-    assert any("in 2 worker processes" in line for line in logs)
+    seq_logs: list[str] = []
+    par_logs: list[str] = []
+    seq = train_all(cfg, tmp_path / "seq", "oracle", seq_logs.append, False, workers=1)
+    par = train_all(cfg, tmp_path / "par", "oracle", par_logs.append, False, workers=2)
+    assert any("in 2 worker processes" in line for line in par_logs)
+    for logs in (seq_logs, par_logs):  # queued before a run starts, training when it starts
+        for name in ("ppo-sr-s0", "ppo-ewri-s0", "il-s0"):
+            queued, training = logs.index(f"{name}: queued"), logs.index(f"{name}: training")
+            assert queued < training
+        assert logs.index("il-s0: training") > next(
+            i for i, line in enumerate(logs) if line.startswith("ppo-ewri-s0: done in")
+        )
     assert [p.name for p in seq] == [p.name for p in par] == ["ppo-sr-s0", "ppo-ewri-s0", "il-s0"]
     for a, b in zip(seq, par, strict=True):
         np.testing.assert_array_equal(_probabilities(a), _probabilities(b))

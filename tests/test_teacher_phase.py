@@ -8,26 +8,28 @@ from pathlib import Path
 
 from pirl.agents.teacher_phase import phase_of
 from pirl.config.run import RunConfig
-from pirl.evaluate.reproduce import describe_plan, teacher_phases, train_all
+from pirl.evaluate.plan import check_reproduce, make_plan, plan_runs, teacher_phases
+from pirl.evaluate.reproduce import train_all
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def describe_plan(cfg: RunConfig, advisor: str, out: Path) -> list[str]:
+    return make_plan(check_reproduce(cfg, advisor, 2), out).describe()
+
+
 def test_the_plan_shows_one_phase_per_slow_teacher_with_its_minutes(tmp_path):
     quick = RunConfig.from_yaml(ROOT / "configs" / "quick.yaml")
-    lines = describe_plan(quick, "local", tmp_path, 2, 2)
+    lines = describe_plan(quick, "local", tmp_path)
     phase = [line for line in lines if "teacher phase" in line]
     assert len(phase) == 1 and "teacher-local-compact" in phase[0] and "min" in phase[0]
     assert "its 2 PIRL runs start after it" in phase[0]
     # The oracle is fast enough during the run: no phase; nor without the setting.
-    assert not any("teacher phase" in line for line in describe_plan(quick, "oracle", tmp_path,
-                                                                      2, 2))  # fmt: skip
+    assert not any("teacher phase" in line for line in describe_plan(quick, "oracle", tmp_path))
     off = quick.with_overrides(reproduce={"teacher_phase_answers": 0})
     assert phase_of(off, {"advisor": "local"}) is None
     # Variants that differ only in PARE's weights share their teacher, so one phase.
     study = RunConfig.from_yaml(ROOT / "configs" / "study-camera.yaml")
-    from pirl.evaluate.reproduce import plan_runs
-
     phases = teacher_phases(study, plan_runs(study, "local"))
     assert len({p.name for p in phases.values()}) == 1 and len(phases) == 6
 

@@ -306,15 +306,15 @@ def reproduce(
     from pirl.agents.run_folder import folder_lock
     from pirl.agents.train import TrainingInterrupted
     from pirl.config.run import RunConfig
-    from pirl.evaluate.reproduce import check_reproduce
-    from pirl.evaluate.reproduce import reproduce as run_reproduce
+    from pirl.evaluate.plan import check_reproduce, make_plan
+    from pirl.evaluate.reproduce import run_reproduction
 
     path = _preset(config, "--config") if config else _preset(profile)
     cfg = RunConfig.from_yaml(path)
     if seeds:
         cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
     advisor = advisor or cfg.pare.advisor
-    check_reproduce(cfg, advisor, workers)
+    checked = check_reproduce(cfg, advisor, workers)  # refused before any folder is made
     out = out or Path("results") / profile
     console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
     try:
@@ -324,11 +324,9 @@ def reproduce(
             Progress(console=console, transient=True) as bar,
         ):
             progress = _episode_progress(bar, "evaluation")
-            report = run_reproduce(
-                cfg,
-                out,
-                advisor,
-                workers,
+            # The plan reads the run folders already in --out: made under the folder's lock.
+            report = run_reproduction(
+                make_plan(checked, out),
                 log=lambda m: console.print(m),
                 progress=progress,
                 ray_address=ray_address,

@@ -1,4 +1,5 @@
-"""Ray: evaluation episodes and training runs on more than one machine (``pirl[distributed]``).
+"""Where work runs: Ray for evaluation episodes and training jobs on more than one machine
+(``pirl[distributed]``), and the serial and process-pool executors of training jobs beside it.
 
 ``--ray-address ADDR`` on ``pirl evaluate`` and ``pirl reproduce`` lands here. ADDR is
 
@@ -9,15 +10,17 @@
 Evaluation: :func:`ray_executor` is an ``executor_factory`` for
 :func:`pirl.evaluate.runner.evaluate`; each chunk of episodes becomes one Ray task running the
 same :func:`~pirl.evaluate.runner.run_chunk` as the local worker processes, so the numbers are
-identical. Training: :func:`train_on_ray` runs one task per method x seed, calling the same
-``train``/``train_il`` with the same arguments as the sequential loop; an IL run waits for its
-PPO-EWRI expert.
+identical. Training: each job of a reproduction's plan (a run, or a teacher phase) runs
+:func:`train_job`, the same function in this process, in a local process pool or in a Ray
+task; :func:`open_executor` opens the one that :class:`ExecutorChoice` names, and
+:func:`pirl.evaluate.plan.run_plan` submits the jobs to it in dependency order.
 
 Every node needs the same ``pirl`` installed, and the output folder must be on a filesystem
 that all nodes share at the same path (NFS or similar): workers read and write run folders
 there, and run tasks in the driver's working directory, so relative paths mean the same thing.
 On a local instance this holds trivially. Secrets such as ``OPENAI_API_KEY`` are not sent to
-the cluster: set them in the environment of ``ray start`` on each node.
+the cluster: set them in the environment of ``ray start`` on each node (a teacher phase and
+the PIRL runs ask their teacher there, so a local model must be there too).
 
 Ray is imported only when one of these functions is called, so ``pirl`` works without it.
 """
@@ -25,18 +28,21 @@ Ray is imported only when one of these functions is called, so ``pirl`` works wi
 from __future__ import annotations
 
 import contextlib
+import multiprocessing as mp
 import os
 import socket
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future, as_completed
+from concurrent.futures import Future
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal
 
+from pirl import _quiet
 from pirl.config.errors import ConfigError
 
 if TYPE_CHECKING:
-    from pirl.config.run import RunConfig
+    from pirl.agents.teacher_phase import TeacherPhase
 
 INSTALL_HINT = "install the extra: pip install 'pirl[distributed]'"
 ADDRESS_FORMS = "HOST:PORT, ray://HOST:PORT, auto or local"
@@ -137,6 +143,12 @@ class RayExecutor:
         self._refs.append(ref)
         return ref
 
+    def cpus(self) -> int:
+        """The CPUs of the cluster now: how many one-CPU tasks run at once."""
+        if self._ray is None:
+            raise RuntimeError("use RayExecutor in a with-block")
+        return max(1, int(self._ray.cluster_resources().get("CPU", 1)))
+
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         if exc_type is not None:
             for ref in self._refs:
@@ -151,66 +163,148 @@ def ray_executor(address: str, workers: int) -> RayExecutor:
     return RayExecutor(address, workers)
 
 
-# -- training -------------------------------------------------------------------------------
-class TrainJob(NamedTuple):
-    """One run of :func:`pirl.evaluate.reproduce.train_all`'s plan."""
+# -- training jobs --------------------------------------------------------------------------
+TEACHER = "teacher"
+"""The method name of a teacher phase among the training jobs (it has no run folder)."""
+
+Backend = Literal["serial", "processes", "ray"]
+"""Where training jobs run: in this process, in a pool of local processes, or on Ray."""
+
+
+@dataclass(frozen=True)
+class TrainJob:
+    """One job of a reproduction's training: a run to train or resume, or a teacher phase."""
 
     name: str
+    """The run folder's name under ``runs/``, or the teacher phase's name."""
     method: str
+    """The trained method, or :data:`TEACHER` for a teacher phase."""
     advisor: str
+    """An advised run's advisor (empty keeps the config's), or the phase's teacher."""
     seed: int
-    run: Path
-    resume: bool
+    """The training seed (0 for a teacher phase)."""
+    run: Path | None = None
+    """The run folder; None for a teacher phase."""
+    state: str = "absent"
+    """The run folder when planned: ``absent``, ``resumable`` (it resumes from its last
+    checkpoint) or ``broken`` (there, with nothing to resume: it starts again)."""
     pare: tuple[tuple[str, Any], ...] = ()
+    """PARE overrides of an advised run, or of the PIRL variant a teacher phase serves."""
+    expert: str = ""
+    """An imitation run: the job of the expert run it learns from (it waits for that one and
+    is not trained when that one fails)."""
+    phase: str = ""
+    """A PIRL run: the teacher phase it waits for (when that fails, the run still trains,
+    without the head start)."""
+
+    @property
+    def resume(self) -> bool:
+        """Whether the run resumes from its last checkpoint."""
+        return self.state == "resumable"
+
+    @property
+    def after(self) -> tuple[str, ...]:
+        """The jobs that must end before this one starts."""
+        return tuple(name for name in (self.expert, self.phase) if name)
 
 
-def _train_job(job: TrainJob, cfg: RunConfig, *expert_done: Any) -> float:
-    """Remote side: the same call as the sequential loop makes. ``expert_done`` only orders."""
+def phase_line(phase: TeacherPhase, done: dict[str, Any]) -> str:
+    """What a finished teacher phase did (``run_teacher_phase``'s answer), in one line."""
+    return (
+        f"{phase.name}: {done['teacher']} answered {done['asked']} planner states, "
+        f"{done['stored']} stored (the dataset had {done['had']}; wanted {phase.answers}) "
+        f"in {done['seconds']:.0f} s"
+    )
+
+
+def train_job(job: TrainJob, cfg_dict: dict[str, Any], show_progress: bool) -> tuple[float, str]:
+    """Run one job wherever it landed (this process, a pool worker, a Ray worker): the same
+    call each way, so a run trains the same model whichever executor ran it. Returns its
+    seconds and, for a teacher phase, the line saying what it did (the caller logs it)."""
     from pirl.agents.runs import train_one
+    from pirl.agents.teacher_phase import TeacherPhase, run_teacher_phase
+    from pirl.config.run import RunConfig
 
     start = time.perf_counter()
-    train_one(job.method, job.advisor, job.seed, cfg, job.run, job.resume, False, dict(job.pare))
-    return time.perf_counter() - start
+    cfg = RunConfig.from_dict(cfg_dict)
+    if job.method == TEACHER:
+        phase = TeacherPhase(job.advisor, job.pare, cfg.reproduce.teacher_phase_answers)
+        note = phase_line(phase, run_teacher_phase(cfg, phase))
+        return time.perf_counter() - start, note
+    if job.run is None:
+        raise ValueError(f"training job {job.name} has no run folder")
+    train_one(job.method, job.advisor, job.seed, cfg, job.run, job.resume, show_progress,
+              dict(job.pare))  # fmt: skip
+    return time.perf_counter() - start, ""
 
 
-def train_on_ray(
-    address: str,
-    cfg: RunConfig,
-    jobs: list[TrainJob],
-    log: Callable[[str], None],
-    workers: int | None = None,
-) -> None:
-    """Run ``jobs`` in parallel on Ray; an imitation job (IL) starts once its expert's run
-    (PPO-EWRI) has finished.
+def worker_init() -> None:
+    """A training worker's thread budget: one torch thread, one numba thread (set before any
+    work), so N workers never run more than N busy threads of their own."""
+    os.environ["OMP_NUM_THREADS"] = "1"
+    os.environ["MKL_NUM_THREADS"] = "1"
+    import numba
+    import torch
 
-    Every job runs to its end even when another fails (finished runs are kept, so a second
-    reproduction resumes); then the first failure is raised.
-    """
-    from pirl.agents.methods import trained_method
+    torch.set_num_threads(1)
+    with contextlib.suppress(RuntimeError):  # already set in this process
+        torch.set_num_interop_threads(1)
+    numba.set_num_threads(1)
+    _quiet.install()
+    _quiet.ignore_sigint()  # Ctrl-C is the parent's: one line, no worker tracebacks
 
-    if not jobs:
-        return
-    jobs = [job._replace(run=Path(job.run).resolve()) for job in jobs]
-    with RayExecutor(address, workers) as pool:
-        refs: dict[str, Any] = {}
-        futures: dict[Future, TrainJob] = {}
-        for job in sorted(jobs, key=lambda j: bool(trained_method(j.method).expert)):
-            entry = trained_method(job.method)  # an imitation run waits for its expert's
-            after = refs.get(entry.expert_folder(job.seed)) if entry.expert else None
-            refs[job.name] = pool.submit_ref(
-                _train_job, job, cfg, *([after] if after is not None else [])
-            )
-            futures[refs[job.name].future()] = job
-        log(f"ray: {len(jobs)} training runs submitted to {address}")
-        failure: BaseException | None = None
-        for future in as_completed(futures):
-            job = futures[future]
-            try:
-                seconds = future.result()
-            except Exception as exc:
-                log(f"{job.name}: failed on Ray ({type(exc).__name__})")
-                failure = failure or exc
-                continue
-            log(f"{job.name}: done in {seconds:.0f} s")
-        if failure is not None:
-            raise failure
+
+class InlineExecutor:
+    """The serial executor: a job runs in this process when it is submitted (with its progress
+    bar and every core's threads) and its future comes back finished. A job's error is kept in
+    its future, as a worker's would be; Ctrl-C during training is no job's failure, so it
+    leaves at once."""
+
+    def __enter__(self) -> InlineExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
+        from pirl.agents.train import TrainingInterrupted
+
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args))
+        except TrainingInterrupted:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the runner reports it as a worker's error
+            future.set_exception(exc)
+        return future
+
+
+@dataclass(frozen=True)
+class ExecutorChoice:
+    """Where a plan's training jobs run."""
+
+    backend: Backend
+    """``serial``, ``processes`` or ``ray``."""
+    workers: int = 1
+    """Worker processes of the pool (``processes`` only; Ray's cluster has its own CPUs)."""
+    ray_address: str = ""
+    """Ray's address (``ray`` only): HOST:PORT, ray://HOST:PORT, auto or local."""
+
+
+@contextlib.contextmanager
+def open_executor(choice: ExecutorChoice) -> Iterator[tuple[Any, int]]:
+    """The executor of ``choice`` and how many jobs it runs at once. Leaving the block by an
+    exception (Ctrl-C) stops what it runs: a pool's workers are stopped by the caller's Ctrl-C
+    handler, Ray's unfinished tasks are cancelled."""
+    if choice.backend == "serial":
+        yield InlineExecutor(), 1
+    elif choice.backend == "processes":
+        # spawn: workers must not inherit the parent's threads (torch, an LLM, numba).
+        ctx = mp.get_context("spawn")
+        with _quiet.QuietProcessPool(
+            choice.workers, mp_context=ctx, initializer=worker_init
+        ) as pool:
+            yield pool, choice.workers
+    else:
+        with RayExecutor(choice.ray_address) as pool:
+            yield pool, pool.cpus()
