@@ -11,7 +11,6 @@ dependency order for all three.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from collections.abc import Callable
@@ -22,9 +21,9 @@ from typing import Any, NamedTuple
 
 from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
 from pirl.advice.registry import advisor_kind
-from pirl.agents import checkpoint
 from pirl.agents.loading import check_act
 from pirl.agents.methods import asks, label, trained_method
+from pirl.agents.run_folder import RunFolder
 from pirl.agents.runs import check_budgets, check_layouts, method_steps
 from pirl.agents.teacher_phase import TeacherPhase, phase_of
 from pirl.config.errors import ConfigError
@@ -149,16 +148,6 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
         return max(1, os.cpu_count() or 1)
-
-
-def run_state(run: Path) -> str:
-    """'complete', 'resumable', 'broken' (exists, nothing to resume) or 'absent'."""
-    meta = run / "meta.json"
-    if meta.is_file() and json.loads(meta.read_text()).get("complete"):
-        return "complete"
-    if checkpoint.latest(run / "checkpoints") is not None:
-        return "resumable"
-    return "broken" if run.exists() else "absent"
 
 
 def steps_text(cfg: RunConfig) -> str:
@@ -359,7 +348,7 @@ def make_plan(profile: CheckedProfile, out: Path) -> Plan:
 
     cfg, runs, workers = profile.cfg, list(profile.runs), profile.workers
     rp, out = cfg.reproduce, Path(out)
-    states = {run.name: run_state(out / "runs" / run.name) for run in runs}
+    states = {run.name: RunFolder(out / "runs" / run.name).state() for run in runs}
     todo = [run for run in runs if states[run.name] != "complete"]
     by_run = teacher_phases(cfg, todo)
     phases = tuple({p.name: p for p in by_run.values()}.values())

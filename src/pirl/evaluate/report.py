@@ -11,7 +11,6 @@ image embedded). Each table is built once as rows (:class:`pirl.evaluate.tables.
 from __future__ import annotations
 
 import base64
-import csv
 import functools
 import json
 import math
@@ -24,6 +23,7 @@ import numpy as np
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select_autoescape
 
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
+from pirl.agents.run_folder import RunFolder
 from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary, size_key
 from pirl.evaluate.tables import Cell, Span, Table, render_markdown
@@ -475,11 +475,7 @@ def learning_curves(runs: Sequence[Path], path: Path) -> Path:
 
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for run in runs:
-        csv_path = Path(run) / "episodes.csv"
-        if not csv_path.is_file():
-            continue
-        with open(csv_path, newline="") as fh:
-            data = [(int(r["timesteps"]), float(r["vcr"])) for r in csv.DictReader(fh)]
+        data = [(row["timesteps"], row["vcr"]) for row in RunFolder(Path(run)).episodes()]
         if not data:
             continue
         steps, vcr = np.array(data).T
@@ -612,7 +608,7 @@ def write_report(
     figures.append(
         _image("Learning curves", "curves", learning_curves(runs, folder / "learning_curves.png"))
     )
-    configs = [(Path(r).name, Path(r) / "config.yaml") for r in runs]
+    configs = [(Path(r).name, RunFolder(Path(r)).config_file) for r in runs]
     page = _page_template().render(
         summary=top,
         glance=glance,

@@ -18,6 +18,8 @@ from pirl import _quiet
 from pirl.advice.registry import DEFAULT_ADVISOR
 from pirl.agents.loading import BUILTIN
 from pirl.agents.methods import asks
+from pirl.agents.run_folder import RunFolder
+from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.evaluate.plan import (
     Log,
@@ -297,17 +299,13 @@ def _advisor_stats(
     LLM-only evaluation's calls."""
     stats: dict[str, Any] = {}
     for run in runs:
-        path = run / "advisor_stats.json"
-        if path.is_file():
-            try:
-                found = json.loads(path.read_text())
-                if not isinstance(found, dict):
-                    raise ValueError("not a JSON object")
-            except (OSError, ValueError) as exc:
-                reason = f"{path} is damaged ({type(exc).__name__})"
-                log(f"warning: {reason}; the report's advice table leaves this run out")
-                stats[run.name] = {"damaged": reason, "source": str(run)}
-                continue
+        try:
+            found = RunFolder(run).advisor_stats
+        except UserError as exc:
+            log(f"warning: {exc}; the report's advice table leaves this run out")
+            stats[run.name] = {"damaged": str(exc), "source": str(run)}
+            continue
+        if found is not None:
             stats[run.name] = {**found, "source": str(run)}
     calls = 0
     if episodes.is_file():
