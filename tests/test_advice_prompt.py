@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pirl.advice import FORMAT_EXAMPLE, VARIANTS, PromptState, build_prompt, parse_recommendation
-from pirl.advice.prompt import PROMPT_VERSION, STATE_MARKER, paper_half_width, prompt_id
+from pirl.advice.prompt import PROMPT_VERSION, STATE_MARKER, prompt_id
+from pirl.world.footprint import paper_half_width
 
 STATE = PromptState(
     position=(14, 0, 2),
@@ -105,7 +106,7 @@ def test_frustum_view_cone() -> None:
      (60, 0.5, 1), (60, 0.7, 1), (60, 0.8, 2), (90, 1.4, 1), (90, 1.5, 2)],
 )  # fmt: skip
 def test_paper_half_width(tilt: int, zoom: float, half: int) -> None:
-    assert paper_half_width(tilt, zoom) == half
+    assert paper_half_width(tilt, round(zoom * 10)) == half
     side = 2 * half + 1
     state = dataclasses.replace(STATE, tilt=tilt, zoom=zoom)
     assert f"{side}x{side} cells" in build_prompt(state)

@@ -29,6 +29,7 @@ from pirl.advice.recommendation import FORMAT_EXAMPLE
 from pirl.config.errors import ConfigError
 from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE
 from pirl.config.run import TEMPLATE_VARIANT
+from pirl.world.footprint import paper_half_width
 
 __all__ = [
     "FOOTPRINTS",
@@ -39,7 +40,6 @@ __all__ = [
     "TEMPLATE_PREFIX",
     "build_prompt",
     "load_template",
-    "paper_half_width",
     "prompt_context",
     "prompt_id",
     "template_hash",
@@ -171,12 +171,6 @@ class PromptState:
             raise ValueError(f"zoom must be positive, got {self.zoom!r}")
 
 
-def paper_half_width(tilt: float, zoom: float) -> int:
-    """Half-width of the paper footprint: ``floor(m * zoom + 0.5)``, m = 2 if tilt < 80 else 1."""
-    m = 2 if tilt < 80 else 1
-    return math.floor(m * zoom + 0.5)
-
-
 def _num(value: float, decimals: int) -> str:
     """``value`` rounded to ``decimals`` places, fixed width, never ``-0``."""
     v = round(float(value), decimals) + 0.0
@@ -235,7 +229,8 @@ def _view_rule(state: PromptState, compact: bool) -> str:
 def _view_now(state: PromptState, compact: bool) -> str:
     """The view cone's current value (state-dependent: it goes with the state)."""
     if state.footprint == "paper":
-        h = paper_half_width(state.tilt, state.zoom)
+        # The footprint kernel's own rule, on the camera's integer steps (zoom in tenths).
+        h = paper_half_width(int(round(state.tilt)), int(round(state.zoom * 10)))
         side = 2 * h + 1
         return f"{side}x{side} cells"
     altitude = int(state.position[2]) + 1

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from pirl.agents.policy import Policy, hold_action
+from pirl.world import dynamics as D
 from pirl.world.planning import (
     MOVE_DELTAS,
     Cell,
@@ -30,18 +31,17 @@ from pirl.world.planning import (
 from pirl.world.state import WorldBatch
 
 _MOVE_ACTION = {delta: action for action, delta in enumerate(MOVE_DELTAS)}
-_TILT_UP, _TILT_DOWN, _PAN_UP, _PAN_DOWN, _ZOOM_IN, _ZOOM_OUT = 6, 7, 8, 9, 10, 11
 
 
 def camera_action(current: tuple[int, int, int], target: tuple[int, int, int]) -> int | None:
     """The camera action that brings (tilt, pan, zoom10) one step closer to ``target``."""
     (tilt, pan, zoom10), (want_tilt, want_pan, want_zoom) = current, target
     if tilt != want_tilt:
-        return _TILT_UP if tilt < want_tilt else _TILT_DOWN
+        return D.TILT_PLUS if tilt < want_tilt else D.TILT_MINUS
     if pan != want_pan:
-        return _PAN_UP if pan < want_pan else _PAN_DOWN
+        return D.PAN_PLUS if pan < want_pan else D.PAN_MINUS
     if zoom10 != want_zoom:
-        return _ZOOM_IN if zoom10 < want_zoom else _ZOOM_OUT
+        return D.ZOOM_PLUS if zoom10 < want_zoom else D.ZOOM_MINUS
     return None
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from pirl.advice.student import STUDENT_FILE
 from pirl.agents.loading import load_policy
-from pirl.agents.methods import ADVISED, BUILTIN
+from pirl.agents.methods import ADVISED, BUILTIN, PLAYED_ALONE
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
 from pirl.agents.run_folder import RunFolder, folder_contents, lock_folder, release_folder
 from pirl.config.errors import ConfigError, UserError
@@ -81,7 +81,7 @@ def distill(
     teacher: str,
     states: int,
     out: Path,
-    policies: Sequence[str] = ("boustrophedon", "random"),
+    policies: Sequence[str] = PLAYED_ALONE,
     seed: int = 0,
     fit_steps: int = 2000,
     batch_size: int = 32,

@@ -19,6 +19,7 @@ from pirl.advice.recommendation import Recommendation
 from pirl.advice.state import advice_requests
 from pirl.agents.policy import Policy, hold_action
 from pirl.config import grid as g
+from pirl.config.errors import ConfigError
 from pirl.world import dynamics as D
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
@@ -54,6 +55,18 @@ class LLMOnlyPolicy(Policy):
     """The advisor's answers, executed as action queues."""
 
     name = "llm-only"
+
+    @classmethod
+    def build(
+        cls,
+        seed: int | None = None,
+        advisor: Advisor | None = None,
+        prompt_variant: str = "paper",
+        max_calls: int = 0,
+    ) -> LLMOnlyPolicy:
+        if advisor is None:
+            raise ConfigError("llm-only needs an advisor")
+        return cls(advisor, prompt_variant, max_calls=max_calls)
 
     def __init__(self, advisor: Advisor, prompt_variant: str = "paper", max_calls: int = 0) -> None:
         self.advisor = advisor

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import io
 import json
 import zipfile
@@ -10,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, trained_method
-from pirl.agents.policy import Policy, RandomPolicy
+from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, method, trained_method
+from pirl.agents.policy import Policy
 from pirl.agents.run_folder import RETRAIN, RunFolder, short_error
 from pirl.config.errors import ConfigError, UserError
 
@@ -209,18 +210,11 @@ def load_policy(
     act by their own rule whatever it says.
     """
     if str(source) in BUILTIN:
-        name = str(source)
-        if name == "boustrophedon":
-            from pirl.agents.boustrophedon import BoustrophedonPolicy
-
-            return BoustrophedonPolicy()
-        if name == "random":
-            return RandomPolicy(seed)
-        if advisor is None:
-            raise ConfigError("llm-only needs an advisor")
-        from pirl.agents.llm_only import LLMOnlyPolicy
-
-        return LLMOnlyPolicy(advisor, prompt_variant, max_calls=max_calls)
+        module, cls = method(str(source)).policy.split(":")
+        played = getattr(importlib.import_module(module), cls)
+        return played.build(
+            seed=seed, advisor=advisor, prompt_variant=prompt_variant, max_calls=max_calls
+        )
     run = Path(source)
     if not run.exists():
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")

@@ -55,6 +55,14 @@ class Method:
     asks: bool = False
     """Played by asking an advisor at every step (LLM-only): it takes ``--advisor``, plays
     ``reproduce.llm_only_episodes`` scenarios and its calls are counted."""
+    policy: str = ""
+    """Played methods: the :class:`~pirl.agents.policy.Policy` class that plays it, as
+    ``module:Class`` (imported only when the method is played)."""
+    planner: bool = False
+    """The coverage planner: the reference learned methods are measured against (the
+    report's gap, the missions, the states a teacher phase asks about)."""
+    animated: bool = True
+    """``pirl reproduce`` records a GIF of it (a random walk's animation shows nothing)."""
     options: tuple[str, ...] = ()
     """The ``pirl train`` options of this method beyond those every method takes (``--out``,
     ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
@@ -102,7 +110,13 @@ METHODS: dict[str, Method] = {
     for m in (
         Method("ppo-sr", "PPO-SR", reward="static"),
         Method("ppo-ewri", "PPO-EWRI"),
-        Method("llm-only", "LLM-only", training=PLAYED, asks=True),
+        Method(
+            "llm-only",
+            "LLM-only",
+            training=PLAYED,
+            asks=True,
+            policy="pirl.agents.llm_only:LLMOnlyPolicy",
+        ),
         Method(
             "il",
             "IL",
@@ -112,14 +126,30 @@ METHODS: dict[str, Method] = {
             options=("expert",),
         ),  # fmt: skip
         Method("pirl", "PIRL", advised=True, options=("advisor", "student")),
-        Method("boustrophedon", "boustrophedon (planner)", training=PLAYED, paper=False),
-        Method("random", "random", training=PLAYED, paper=False),
+        Method(
+            "boustrophedon",
+            "boustrophedon (planner)",
+            training=PLAYED,
+            paper=False,
+            policy="pirl.agents.boustrophedon:BoustrophedonPolicy",
+            planner=True,
+        ),
+        Method(
+            "random",
+            "random",
+            training=PLAYED,
+            paper=False,
+            policy="pirl.agents.policy:RandomPolicy",
+            animated=False,
+        ),
     )
 }
 """Every method, in the reports' order."""
 
 IL = METHODS["il"]
 """The imitation baseline, for its own trainer (:mod:`pirl.agents.imitation`)."""
+PLANNER = next(m for m in METHODS.values() if m.planner)
+"""The coverage planner (boustrophedon)."""
 ADVISED = next(m for m in METHODS.values() if m.advised)
 """The advised method (PIRL): the env its advisor, teacher and student are asked about is
 ``ADVISED.trains_on(env)``."""
@@ -150,6 +180,12 @@ def trained_method(name: str, what: str = "method") -> Method:
     if found is None or found.training == PLAYED:
         raise ConfigError(f"{what}: {name!r} is not trained ({', '.join(TRAINED)})")
     return found
+
+
+def is_planner(key: str) -> bool:
+    """Whether an evaluation key names the coverage planner (an unknown key does not)."""
+    found = METHODS.get(str(key))
+    return found is not None and found.planner
 
 
 def asks(name: str) -> bool:
@@ -201,6 +237,7 @@ __all__ = [
     "METHODS",
     "PAPER_METHODS",
     "PLAYED",
+    "PLANNER",
     "PLAYED_ALONE",
     "PPO_METHODS",
     "TRAIN_IMITATION",
@@ -210,6 +247,7 @@ __all__ = [
     "advised_key",
     "asks",
     "is_advised_key",
+    "is_planner",
     "label",
     "method",
     "report_order",

@@ -125,11 +125,9 @@ def probe_warning(label: str, text: str, prompt_variant: str) -> str:
 def shaped_share(stats: dict[str, Any]) -> float:
     """Share of a PIRL run's steps shaped by advice (student or teacher), from its
     ``advisor_stats.json``."""
-    steps = int(stats.get("steps") or 0)
-    if steps <= 0:
-        return 0.0
-    unshaped = int(stats.get("steps_unshaped", stats.get("steps_missing", 0)))
-    return max(0.0, 1.0 - unshaped / steps)
+    from pirl.pare.stats import RunStats
+
+    return RunStats.of(stats).shaped_share
 
 
 def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> str | None:

@@ -22,6 +22,18 @@ class Policy(ABC):
     name: str = "policy"
     label: str = "policy"
 
+    @classmethod
+    def build(
+        cls,
+        seed: int | None = None,
+        advisor: Any | None = None,
+        prompt_variant: str = "paper",
+        max_calls: int = 0,
+    ) -> Policy:
+        """A played method's policy from the options any played method may take; each class
+        uses those it needs (a planner none of them)."""
+        return cls()
+
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         """Start a new episode."""
         return None
@@ -39,6 +51,10 @@ class RandomPolicy(Policy):
 
     def __init__(self, seed: int | None = None) -> None:
         self._rng = np.random.default_rng(seed)
+
+    @classmethod
+    def build(cls, seed: int | None = None, **_options: Any) -> RandomPolicy:
+        return cls(seed)
 
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         if seed is not None:

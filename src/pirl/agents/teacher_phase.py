@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from pirl.advice.registry import advisor_kind
+from pirl.agents.methods import PLANNER
 from pirl.config.run import RunConfig
 
-POLICY = "boustrophedon"
+POLICY = PLANNER.name
 """The reference policy whose states the teacher answers: the planner covers the world
 systematically, so its states span positions, coverage and battery levels."""
 SEED = 7

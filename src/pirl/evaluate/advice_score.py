@@ -27,6 +27,7 @@ from pirl.advice.oracle import MOVES, oracle_recommendation
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.state import view_requests
 from pirl.advice.student import cohen_kappa
+from pirl.agents.methods import ADVISED, PLAYED_ALONE
 from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
@@ -112,7 +113,6 @@ def score_states(cfg: RunConfig, n: int, seed: int = 0) -> list[WorldView]:
     """``n`` frozen world states from planner and random rollouts (episodes alternate) on the
     validation scenarios of :data:`SCORE_SIZES`, the same for every advisor."""
     from pirl.agents.loading import load_policy
-    from pirl.agents.methods import ADVISED
     from pirl.env.vcpp_env import VCPPEnv
 
     if n < 1:
@@ -122,7 +122,7 @@ def score_states(cfg: RunConfig, n: int, seed: int = 0) -> list[WorldView]:
     for k, size in enumerate(SCORE_SIZES):
         want = n // len(SCORE_SIZES) + (1 if k < n % len(SCORE_SIZES) else 0)
         env = VCPPEnv(ADVISED.trains_on(cfg.env.replace(size=size)))
-        policies = [load_policy("boustrophedon"), load_policy("random", seed=seed)]
+        policies = [load_policy(name, seed=seed) for name in PLAYED_ALONE]
         got = 0
         for episode, scenario in enumerate(validation_seeds(size, 10_000)):
             if got >= want:
@@ -270,7 +270,7 @@ def run_calls(cfg: RunConfig, advisor: str) -> int:
     from pirl.advice.registry import advisor_kind
     from pirl.agents.runs import method_steps
 
-    steps = method_steps(cfg, "pirl")
+    steps = method_steps(cfg, ADVISED.name)
     kind = advisor_kind(advisor)
     p = cfg.pare
     if p.mode == "student":

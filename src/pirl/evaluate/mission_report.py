@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.agents.methods import PLANNER
 from pirl.config.run import RunConfig
 from pirl.evaluate.tables import Cell, Span, Table
 
@@ -85,7 +86,7 @@ def reproduction_missions(
     for site in sites:
         name = Path(site).name
         entries = [
-            _mission(cfg, out / "missions" / f"{name}-planner", site, log, method="boustrophedon")
+            _mission(cfg, out / "missions" / f"{name}-planner", site, log, method=PLANNER.name)
         ]
         best = best_run(records, name, act)
         if best is not None:

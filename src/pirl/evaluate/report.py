@@ -22,11 +22,12 @@ from typing import Any
 import numpy as np
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select_autoescape
 
-from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
+from pirl.agents.methods import PAPER_METHODS, is_advised_key, is_planner, report_order
 from pirl.agents.run_folder import RunFolder
 from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary, size_key
 from pirl.evaluate.tables import Cell, Span, Table, render_markdown
+from pirl.pare.stats import RunStats
 
 # The paper's results (its tables): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
@@ -221,12 +222,10 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
         return Table(title, notes=missing) if missing else None
     body = []
     for name, s in sorted(runs.items()):
-        steps = max(1, int(s["steps"]))
+        run = RunStats.of(s)
         label = s.get("label", "")
         if "source" in s:
             label = honest_label(label, [s["source"]])
-        teacher = s.get("steps_teacher", s.get("steps_fresh", 0) + s.get("steps_stale", 0))
-        unshaped = s.get("steps_unshaped", s.get("steps_missing", 0))
         agreement = (
             f"{s['student_agreement']:.2f} ({s['student_majority']:.2f})"
             if s.get("mode") == "student"
@@ -234,8 +233,8 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
         )
         spent = s.get("budget_exhausted_at_step", -1)
         body.append([
-            name, label, f"{s.get('steps_student', 0) / steps:.0%}", f"{teacher / steps:.0%}",
-            f"{unshaped / steps:.0%}", f"{s.get('mean_staleness', 0.0):.1f}",
+            name, label, f"{run.share(run.student):.0%}", f"{run.share(run.teacher):.0%}",
+            f"{run.share(run.unshaped):.0%}", f"{s.get('mean_staleness', 0.0):.1f}",
             f"{s.get('teacher_calls_per_step', 0.0):.4f}", agreement,
             str(spent) if spent >= 0 else "not spent",
         ])  # fmt: skip
@@ -357,7 +356,7 @@ def summary_lines(
     gaps = []
     for size in sizes:
         here = [r for r in grid if r["size"] == size]
-        planner = next((r for r in here if r["method"] == "boustrophedon"), None)
+        planner = next((r for r in here if is_planner(r["method"])), None)
         learned = [r for r in here if r.get("act") != "fixed"]
         if planner is None or not learned:
             continue
@@ -378,9 +377,7 @@ def summary_lines(
     if runs:
         parts = []
         for name, st in sorted(runs.items()):
-            steps = max(1, int(st["steps"]))
-            unshaped = int(st.get("steps_unshaped", st.get("steps_missing", 0)))
-            parts.append(f"{name} {1 - unshaped / steps:.0%}")
+            parts.append(f"{name} {RunStats.of(st).shaped_share:.0%}")
         lines.append(
             "Share of training steps shaped by advice (student or teacher) per PIRL run: "
             + ", ".join(parts) + "; an unshaped step trains as PPO-EWRI."

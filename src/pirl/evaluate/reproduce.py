@@ -17,7 +17,7 @@ from typing import Any
 from pirl import _quiet
 from pirl.advice.registry import DEFAULT_ADVISOR
 from pirl.agents.loading import BUILTIN
-from pirl.agents.methods import asks
+from pirl.agents.methods import ADVISED, asks, method
 from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
@@ -111,7 +111,7 @@ def start_gifs(
     specs += [
         spec_for_builtin(name, advisor, cfg.reproduce.llm_only_max_calls)
         for name in cfg.reproduce.builtins
-        if name in ("llm-only", "boustrophedon")  # the random walk's animation shows nothing
+        if method(name).animated
     ]
     cfg_dict = cfg.to_dict()
     return [
@@ -231,7 +231,7 @@ def advice_quality(
     by_name = {r.name: r for r in runs}
     advisors = []
     for variant in pirl_variants(cfg, advisor):
-        name = variant_name("pirl", variant)
+        name = variant_name(ADVISED.name, variant)
         path = folder / f"{name}.json"
         vcfg = cfg.with_variant(variant)
         score = json.loads(path.read_text()) if path.is_file() else {}

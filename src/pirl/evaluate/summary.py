@@ -24,6 +24,7 @@ from scipy import stats
 
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
+from pirl.pare.stats import RunStats
 
 log = logging.getLogger(__name__)
 
@@ -150,11 +151,10 @@ def _run_shaping(source: str) -> tuple[float, int, int] | None:
         min_shaped = pare.min_shaped
     except ConfigError:
         return None
-    steps = int((record or {}).get("steps") or 0)
-    if record is None or steps <= 0:
+    run = RunStats.of(record or {})
+    if record is None or run.steps <= 0:
         return None
-    unshaped = int(record.get("steps_unshaped", record.get("steps_missing", 0)))
-    return min_shaped, steps, unshaped
+    return min_shaped, run.steps, run.unshaped
 
 
 def unshaped_share(sources: Iterable[str]) -> float | None:

@@ -94,6 +94,39 @@ class PareStats:
         self.staleness_sum = int(counts[5])
 
 
+@dataclass(frozen=True)
+class RunStats:
+    """How a finished PIRL run's steps were shaped, read from its recorded statistics (the
+    :meth:`PareStats.as_dict` a run writes to ``advisor_stats.json``). Runs recorded before
+    ``steps_unshaped`` was written call it ``steps_missing``."""
+
+    steps: int
+    unshaped: int
+    teacher: int
+    student: int
+
+    @classmethod
+    def of(cls, record: dict[str, Any]) -> RunStats:
+        teacher = record.get("steps_teacher")
+        if teacher is None:
+            teacher = record.get("steps_fresh", 0) + record.get("steps_stale", 0)
+        return cls(
+            steps=int(record.get("steps") or 0),
+            unshaped=int(record.get("steps_unshaped", record.get("steps_missing", 0))),
+            teacher=int(teacher),
+            student=int(record.get("steps_student", 0)),
+        )
+
+    def share(self, count: int) -> float:
+        """``count`` steps as a share of the run's (0 for a run of no steps)."""
+        return count / self.steps if self.steps > 0 else 0.0
+
+    @property
+    def shaped_share(self) -> float:
+        """Share of steps shaped by advice (student or teacher); 0 for a run of no steps."""
+        return max(0.0, 1.0 - self.share(self.unshaped)) if self.steps > 0 else 0.0
+
+
 class Health:
     """Counts the teacher's answers into ``stats`` and stops training when it keeps failing.
 
