@@ -47,9 +47,9 @@ from pirl.advice.local import LocalAdvisor
 from pirl.advice.model_store import default_dtype
 from pirl.advice.prompt import build_prompt
 from pirl.advice.state import prompt_state
-from pirl.agents.pirl_advice import PirlAdvice
 from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
+from pirl.pare.bundle import AdviceBundle
 from pirl.pare.vec_env import PAREVecEnv
 
 SETTINGS = {"size": (15, 15, 3), "reward": "ewri", "llm_weight": True}
@@ -84,7 +84,7 @@ def unwrapped_rate(envs: int, steps: int) -> float:
 
 def pare_case(advisor, envs: int, mode: str, k: int, steps: int | None, seconds: float) -> dict:
     settings = PareSettings(mode=mode, query_every=k)
-    advice = PirlAdvice(advisor, None, None, 0.0, 16, "")
+    advice = AdviceBundle(advisor, None, None, 0.0, 16, "")
     pare = PAREVecEnv.from_settings(make_vec_env(envs, seed=0, **SETTINGS), settings, advice)
     pare.reset()
     actions = np.random.default_rng(0).integers(0, 12, (100_000, envs))

@@ -7,19 +7,19 @@ import numpy as np
 import pytest
 
 from pirl.advice.oracle import OracleAdvisor
-from pirl.agents.pirl_advice import PirlAdvice
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
 from pirl.env.vector import VCPPVectorEnv
+from pirl.pare.bundle import AdviceBundle
 from pirl.pare.vec_env import PAREVecEnv
 from pirl.pare.vector import PAREVectorWrapper
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
 
 
-def _advice() -> PirlAdvice:
-    return PirlAdvice(OracleAdvisor(), None, None, 0.0, 16, "oracle")
+def _advice() -> AdviceBundle:
+    return AdviceBundle(OracleAdvisor(), None, None, 0.0, 16, "oracle")
 
 
 def _pair(n: int, settings: dict, pare: PareSettings, seed: int = 5):

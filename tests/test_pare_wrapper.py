@@ -10,12 +10,12 @@ import pytest
 from pirl.advice.base import Advisor, Answer
 from pirl.advice.oracle import OracleAdvisor
 from pirl.advice.recommendation import Recommendation
-from pirl.agents.pirl_advice import PirlAdvice
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
 from pirl.env.rewards import LLM_INDEX
 from pirl.pare import alignment, f_llm
+from pirl.pare.bundle import AdviceBundle
 from pirl.pare.vec_env import PAREVecEnv
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
@@ -69,7 +69,7 @@ def make_pare(
         student_wait_teacher=wait_teacher, max_failure_rate=max_failure_rate,
         failure_window=failure_window,
     )  # fmt: skip
-    advice = PirlAdvice(advisor, student, dataset, teacher_rate, teacher_batch, "")
+    advice = AdviceBundle(advisor, student, dataset, teacher_rate, teacher_batch, "")
     return PAREVecEnv.from_settings(venv, settings, advice, refit_every=refit_every)
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,31 +16,7 @@ from pirl.advice.registry import find_advisor_kind
 from pirl.agents.methods import ADVISED
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
-
-
-@dataclass
-class PirlAdvice:
-    """The advice side of one PIRL run."""
-
-    advisor: Any
-    """The teacher (cache and budget in front, as configured)."""
-    student: Any | None
-    """Student mode: the distilled advisor (from ``--student`` or new)."""
-    dataset: Any | None
-    """Student mode: the teacher answers, shared across runs and processes."""
-    teacher_rate: float
-    """Student mode: teacher calls per env-step."""
-    teacher_batch: int
-    """Student mode: most prompts per teacher request (the backend's own batch size)."""
-    label: str
-    """e.g. ``PIRL (student of local:SmolLM2-135M-Instruct; lam_cam 1, lam_move 1)``."""
-
-    def drop_own_answers(self) -> int:
-        """Delete the stored answers under this run's own dataset key (a fresh start of a run
-        whose answers are its own); returns how many."""
-        if self.student is None or self.dataset is None:
-            return 0
-        return self.dataset.drop(self.student.teacher)
+from pirl.pare.bundle import AdviceBundle
 
 
 def _num(value: float) -> str:
@@ -76,7 +51,7 @@ def build_pirl_advice(
     seed: int = 0,
     log: Callable[[str], Any] = print,
     run: str = "",
-) -> PirlAdvice:
+) -> AdviceBundle:
     """Build (and probe) the teacher, and in student mode the student and its dataset.
 
     ``run``: the run folder, which keys the run's own answers under
@@ -107,9 +82,9 @@ def build_pirl_advice(
     rate = kind.teacher_rate(cfg) if kind else cfg.pare.teacher_rate
     batch = kind.batch_size(cfg) if kind else 4 * cfg.advisor.openai_concurrency
     if cfg.pare.mode != "student":
-        return PirlAdvice(advisor, None, None, rate, batch, label)
+        return AdviceBundle(advisor, None, None, rate, batch, label)
     student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed, run)
-    return PirlAdvice(advisor, student, dataset, rate, batch, label)
+    return AdviceBundle(advisor, student, dataset, rate, batch, label)
 
 
 def probe_warning(label: str, text: str, prompt_variant: str) -> str:
@@ -225,7 +200,6 @@ def make_student(
 
 
 __all__ = [
-    "PirlAdvice",
     "build_pirl_advice",
     "dataset_path",
     "make_student",

@@ -141,7 +141,7 @@ class EnvStack:
 
 def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str = "") -> EnvStack:
     """make_vec_env on the resolved config's training env -> (PARE when there is ``advice``,
-    a :class:`~pirl.agents.pirl_advice.PirlAdvice`) -> VecMonitor."""
+    a :class:`~pirl.pare.bundle.AdviceBundle`) -> VecMonitor."""
     venv = make_vec_env(cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env(cfg))
     pare = None
     inner = venv

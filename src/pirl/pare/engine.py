@@ -21,6 +21,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.env.shaping import ShapingHooks
 from pirl.pare.board import AdviceBoard
+from pirl.pare.bundle import AdviceBundle
 from pirl.pare.core import Shaped, Weights, add_llm_term, shape
 from pirl.pare.sources import SOURCES, AdviceSource, SourceSetup
 from pirl.pare.stats import Health, PareStats
@@ -60,14 +61,14 @@ class PARE:
         cls,
         env: ShapingHooks,
         settings: PareSettings,
-        advice: Any,
+        advice: AdviceBundle,
         refit_every: int = 256,
         seed: int = 0,
         source: str = "",
     ) -> PARE:
         """PARE as the ``pare`` settings section says.
 
-        ``advice`` is the run's advice side (:class:`pirl.agents.pirl_advice.PirlAdvice`:
+        ``advice`` is the run's advice side (:class:`~pirl.pare.bundle.AdviceBundle`:
         the teacher, in student mode the student and its dataset, the teacher's rate and
         batch size, the label); ``refit_every`` is PPO's ``n_steps``; ``seed`` the teacher's
         sampling stream; ``source`` the run's name in the teacher dataset (a resumed run

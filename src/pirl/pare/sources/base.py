@@ -17,6 +17,7 @@ import numpy as np
 from pirl.advice.base import Advisor
 from pirl.env.shaping import ShapingHooks
 from pirl.pare.board import AdviceBoard
+from pirl.pare.bundle import AdviceBundle
 from pirl.pare.stats import Health
 
 
@@ -32,8 +33,8 @@ class SourceSetup:
     """The teacher (cached and budgeted as configured)."""
     settings: Any
     """The ``pare`` settings section (:class:`PareSettings`)."""
-    advice: Any
-    """The run's advice side (:class:`pirl.agents.pirl_advice.PirlAdvice`): student, dataset,
+    advice: AdviceBundle
+    """The run's advice side: student, dataset,
     teacher rate and batch size."""
     refit_every: int
     """Vector steps per rollout (PPO's ``n_steps``): the student's rollout boundaries."""
