@@ -1,4 +1,4 @@
-"""build_prompt: every item of DESIGN.md section 6, rounding, determinism, variants."""
+"""build_prompt: every item of the paper's prompt, rounding, determinism, variants."""
 
 from __future__ import annotations
 

@@ -124,7 +124,7 @@ def test_nested_sections_may_be_given_as_mappings():
 
 
 def test_every_setting_has_a_docstring():
-    """A field's docstring is the user's documentation of the key (DESIGN: config as code)."""
+    """A field's docstring is the user's documentation of the key (config as code)."""
     missing = []
     for path in sorted(CONFIG.glob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):

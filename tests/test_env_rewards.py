@@ -182,7 +182,7 @@ def test_cam_usage_term(open_env):
 def test_cam_usage_needs_a_camera_change(open_env):
     """A camera action at its limit changes nothing; cells the wind brings are not its doing.
 
-    DESIGN.md: cam_usage = 1 if a camera action added new cells.
+    The rule (docs/design.md): cam_usage = 1 if a camera action added new cells.
     """
     env, _, _ = open_env((7, 7, 1), size=(15, 15, 3), wind_prob=1.0, wind_seed=3)
     windy_new = 0

@@ -1,4 +1,4 @@
-"""PARE alignment terms (DESIGN.md section 5), computed by hand."""
+"""PARE alignment terms (docs/architecture.md, one training step), computed by hand."""
 
 from __future__ import annotations
 

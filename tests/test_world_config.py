@@ -1,4 +1,4 @@
-"""VCPPConfig: defaults from DESIGN.md, alpha scaling, strict validation, YAML, gym.make errors."""
+"""VCPPConfig: the paper's defaults, alpha scaling, strict validation, YAML, gym.make errors."""
 
 from __future__ import annotations
 
@@ -267,3 +267,17 @@ def test_replace_validates():
     assert cfg.replace(size=[30, 30, 3]).size == (30, 30, 3)
     with pytest.raises(ConfigError, match="start_zoom"):
         cfg.replace(start_zoom=1.05)
+
+
+def test_a_fresh_interpreter_makes_the_env_by_its_gymnasium_id():
+    """Without ``import pirl``: Gymnasium's own ``module:id`` form imports the package."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gymnasium as gym; env = gym.make('pirl:pirl/VCPP-v0', size=(10, 10, 3)); "
+        "obs, _ = env.reset(seed=0); print(obs.shape)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().startswith("(")

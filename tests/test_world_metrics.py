@@ -1,4 +1,4 @@
-"""Episode metrics (DESIGN.md section 9) on tiny scripted episodes computed by hand."""
+"""Episode metrics (VCR, BE, RVC and the rest) on tiny scripted episodes computed by hand."""
 
 from __future__ import annotations
 

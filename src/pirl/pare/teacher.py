@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from pirl.advice.base import Advisor, Answer, error_answer
-from pirl.advice.budget import BUDGET_EXHAUSTED
 from pirl.advice.factory import exhausted
 from pirl.advice.student import TeacherDataset, encode
 from pirl.env.shaping import ShapingHooks
@@ -192,8 +191,3 @@ class TeacherQueue:
         if self._job is not None:
             self._job[1].cancel()
         self._pool.shutdown(wait=True)
-
-
-def budget_refused(answer: Answer) -> bool:
-    """Whether an answer is a budget refusal (not a failure of the advisor)."""
-    return answer.error == BUDGET_EXHAUSTED

@@ -69,9 +69,6 @@ their waypoint, up to a contact; ``hover``: holding the cell during camera actio
 the geofence; ``timeout``: flight of moves that ran out ``step_timeout_s``, up to a contact;
 ``contact``: flight after a contact that counted as a collision, to the end of its step."""
 
-END_REASONS = ("coverage", "battery", "step_limit")
-"""Why an episode ended (the ``end`` field of its metrics), checked in this order."""
-
 
 @dataclass(frozen=True)
 class Pose:
