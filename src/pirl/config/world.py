@@ -8,7 +8,9 @@ a run config, or the keywords of ``gym.make("pirl/VCPP-v0", ...)``); it is loade
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from pirl.config.errors import ConfigError
 from pirl.config.grid import (
@@ -153,6 +155,24 @@ class VCPPConfig(Settings, section="env"):
     """Most memory, GB, that the worlds of one command may need (their grids and recording
     buffers, estimated before anything is allocated); a larger request is refused in one line.
     0: half of this machine's memory. Not part of a run's identity (a resume may change it)."""
+
+    @classmethod
+    def resolve(
+        cls, config: VCPPConfig | Mapping[str, Any] | None, settings: Mapping[str, Any]
+    ) -> VCPPConfig:
+        """A config (object, mapping or None for the defaults) with keyword ``settings`` on
+        top, both checked: what every env constructor and ``gym.make`` take."""
+        if config is None:
+            base = cls()
+        elif isinstance(config, VCPPConfig):
+            base = config
+        elif isinstance(config, Mapping):
+            base = cls.from_dict(config)
+        else:
+            raise ConfigError(
+                f"config must be a VCPPConfig or a mapping, got {type(config).__name__}"
+            )
+        return base.replace(**settings) if settings else base
 
     def validate(self) -> None:
         """Sizes, choices, ranges and the camera's start pose on the action grid."""

@@ -19,19 +19,6 @@ from pirl.world import dynamics as D
 from pirl.world.state import Scenario, WorldBatch
 
 
-def resolve_config(config: VCPPConfig | Mapping[str, Any] | None, settings: Mapping) -> VCPPConfig:
-    """Merge a config (object, mapping or None) with keyword settings, validating both."""
-    if config is None:
-        base = VCPPConfig()
-    elif isinstance(config, VCPPConfig):
-        base = config
-    elif isinstance(config, Mapping):
-        base = VCPPConfig.from_dict(config)
-    else:
-        raise ConfigError(f"config must be a VCPPConfig or a mapping, got {type(config).__name__}")
-    return base.replace(**settings) if settings else base
-
-
 class VCPPEnv(gym.Env):
     """Visual coverage path planning with a pan-tilt-zoom camera on a 3D grid.
 
@@ -106,7 +93,7 @@ class VCPPEnv(gym.Env):
         render_mode: str | None = None,
         **settings: Any,
     ) -> None:
-        self.cfg = resolve_config(config, settings)
+        self.cfg = VCPPConfig.resolve(config, settings)
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode={render_mode!r}: allowed values are None, 'rgb_array'")
         self.render_mode = render_mode

@@ -16,7 +16,6 @@ from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
-from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
@@ -41,7 +40,7 @@ class VCPPVecEnv(ShapingHooks, VecEnv):
         parallel: bool | None = None,
         **settings: Any,
     ) -> None:
-        self.cfg = resolve_config(config, settings)
+        self.cfg = VCPPConfig.resolve(config, settings)
         self.core = EnvCore(self.cfg, num_envs, parallel)
         n = obs_size_for(self.cfg)
         self.render_mode = "rgb_array"

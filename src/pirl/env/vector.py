@@ -24,7 +24,6 @@ from pirl.env.info import InfoSnapshot, LazyVectorInfo
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
-from pirl.env.vcpp_env import resolve_config
 from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
@@ -69,7 +68,7 @@ class VCPPVectorEnv(ShapingHooks, VectorEnv):
         **settings: Any,
     ) -> None:
         settings.pop("max_episode_steps", None)  # the step limit is the config's max_steps
-        self.cfg = resolve_config(config, settings)
+        self.cfg = VCPPConfig.resolve(config, settings)
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode={render_mode!r}: allowed values are None, 'rgb_array'")
         self.render_mode = render_mode
