@@ -2,14 +2,20 @@
 
 ``train()`` is what ``pirl train`` calls. Reading it in order follows one run:
 
-1. :func:`prepare_run_folder` refuses to overwrite a run, or finds the checkpoint to resume.
-2. :func:`build_env_stack` makes the batched worlds (``make_vec_env``), wraps them in PARE for
-   ``pirl`` (the advisor's reward term), then in SB3's ``VecMonitor``.
-3. :func:`build_ppo` makes the PPO model (MLP actor and critic on the 317-value observation).
+0. The config is settled once: :func:`resolved_config` (the method's env) and, on resume,
+   :func:`check_resume` against the run's own files.
+1. PIRL only: the advice (teacher, probe, student), before any folder exists.
+2. :func:`~pirl.agents.run_folder.prepare_run_folder` refuses to overwrite a run, or finds the
+   checkpoint to resume; a new run's :class:`~pirl.agents.run_folder.RunFolder` records
+   ``config.yaml`` and ``meta.json``.
+3. :func:`build_env_stack` makes the batched worlds (``make_vec_env``), wraps them in PARE for
+   an advised method (the advisor's reward term), then in SB3's ``VecMonitor``;
+   :func:`build_ppo` makes the PPO model (MLP actor and critic on the flat observation).
 4. ``model.learn`` runs with :class:`RunCallback`, which checkpoints at rollout boundaries,
    logs reward terms, coverage and PARE statistics to TensorBoard and ``episodes.csv``, and
-   shows progress. Ctrl-C writes the last rollout-boundary state as a checkpoint.
-5. The final model and statistics are written; ``meta.json`` says the run is complete.
+   shows progress. Ctrl-C writes the last rollout-boundary state as a checkpoint. The final
+   model and statistics are written; ``meta.json`` says the run is complete. One
+   ``try``/``finally`` closes the envs and releases the folder on every way out.
 """
 
 from __future__ import annotations
