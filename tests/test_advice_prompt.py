@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from pirl.advice import FORMAT_EXAMPLE, VARIANTS, PromptState, build_prompt, parse_recommendation
 from pirl.advice.prompt import PROMPT_VERSION, STATE_MARKER, prompt_id
-from pirl.world.footprint import paper_half_width
+from pirl.config.grid import paper_half_width
 
 STATE = PromptState(
     position=(14, 0, 2),

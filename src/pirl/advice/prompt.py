@@ -27,9 +27,8 @@ from typing import Any
 
 from pirl.advice.recommendation import FORMAT_EXAMPLE
 from pirl.config.errors import ConfigError
-from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE
+from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE, paper_half_width
 from pirl.config.run import TEMPLATE_VARIANT
-from pirl.world.footprint import paper_half_width
 
 __all__ = [
     "FOOTPRINTS",

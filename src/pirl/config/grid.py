@@ -34,3 +34,11 @@ def pan_steps() -> tuple[int, ...]:
 def zoom_steps() -> tuple[float, ...]:
     """Every zoom factor the camera can hold."""
     return tuple(round(k / 10.0, 1) for k in range(ZOOM_MIN10, ZOOM_MAX10 + 1, ZOOM_STEP10))
+
+
+def paper_half_width(tilt: int, zoom10: int) -> int:
+    """Half-width of the paper footprint's square, ``floor(m * zoom + 0.5)`` with m = 2 below
+    80 degrees of tilt, else 1, in integer arithmetic on the camera's steps (zoom in tenths).
+    The footprint kernel compiles this very function; the prompt states it."""
+    m = 2 if tilt < 80 else 1
+    return (m * zoom10 + 5) // 10

@@ -22,6 +22,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from pirl.config import grid
+
 PAPER = 0
 FRUSTUM = 1
 # A square of half-width 4 (zoom 2.0, tilt < 80) is the largest paper footprint.
@@ -84,11 +86,8 @@ def lens_of(
     )
 
 
-@numba.njit(cache=True, inline="always")
-def paper_half_width(tilt: int, zoom10: int) -> int:
-    """Half-width of the paper model's square: floor(m * zoom + 0.5) in integer arithmetic."""
-    m = 2 if tilt < 80 else 1
-    return (m * zoom10 + 5) // 10
+paper_half_width = numba.njit(cache=True, inline="always")(grid.paper_half_width)
+"""The rule of :func:`pirl.config.grid.paper_half_width`, compiled for the kernels."""
 
 
 @numba.njit(cache=True)
