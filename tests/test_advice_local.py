@@ -65,6 +65,18 @@ def advisor():
     torch.set_num_threads(threads)
 
 
+@pytest.fixture(scope="module")
+def advisor_f32():
+    """float32, so that rounding cannot flip a greedy choice; loaded once for the tests that
+    pin answers (each takes its own ``with_settings()`` copy: the same model, no kept prefixes).
+    """
+    threads = torch.get_num_threads()
+    adv = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    yield adv
+    adv.close()
+    torch.set_num_threads(threads)
+
+
 def test_embedded_model_is_found_without_importing_it() -> None:
     path = embedded_gguf_path()
     assert path.suffix == ".gguf" and path.stat().st_size > 50_000_000
@@ -214,10 +226,11 @@ def test_folder_build_failure_leaves_nothing(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-def test_prefix_reuse_gives_the_answers_of_a_whole_prefill() -> None:
+def test_prefix_reuse_gives_the_answers_of_a_whole_prefill(advisor_f32: LocalAdvisor) -> None:
     # float32, so that rounding cannot flip a greedy choice: the same answers, token for
     # token, with the shared prefix's key/value cache kept and without it.
-    reuse = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    reuse = advisor_f32.with_settings()  # no prefixes kept yet
+    assert reuse.prefix_reuse and not reuse._prefixes
     whole = reuse.with_settings()
     whole.prefix_reuse = False
     states = varied_states(10, seed=5)  # four sizes, both footprints: several prefixes
@@ -295,10 +308,12 @@ PINNED_ANSWERS = [
 ]
 
 
-def test_the_decoding_loop_gives_the_answers_of_stock_generate() -> None:
+def test_the_decoding_loop_gives_the_answers_of_stock_generate(
+    advisor_f32: LocalAdvisor,
+) -> None:
     from pirl.advice.grammar import PREFILL
 
-    llm = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
+    llm = advisor_f32.with_settings()  # no prefixes kept from another test
     states = varied_states(6, seed=11)
     prompts = [build_prompt(s, v) for s, v in zip(states, ["compact", "paper"] * 3, strict=True)]
     assert [a.text for a in llm.advise(prompts)] == PINNED_ANSWERS
