@@ -306,6 +306,7 @@ class Plan:
             acts=list(rp.acts),
             sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
             sites=list(ev.sites),
+            sim_sites={"physics": []},  # reproduce.sites: zero-shot in the grid simulator
         )
 
 

@@ -121,7 +121,10 @@ class EvalPlan:
     episodes_per_method: dict[str, int] = field(default_factory=dict)
     sim_sizes: dict[str, list[tuple[int, int, int]]] = field(default_factory=dict)
     sites: list[str] = field(default_factory=list)
-    """Site folders evaluated beside the sizes (grid simulator only)."""
+    """Site folders evaluated beside the sizes."""
+    sim_sites: dict[str, list[str]] = field(default_factory=dict)
+    """Site folders per simulator, overriding ``sites`` (``pirl reproduce`` judges its sites
+    in the grid simulator only)."""
     sim_episodes: dict[str, int] = field(default_factory=dict)
     acts: list[str] = field(default_factory=lambda: ["greedy"])
     sim_acts: dict[str, list[str]] = field(default_factory=dict)
@@ -241,7 +244,7 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
             # A batched chunk is best large: one chunk per worker; else two per worker.
             batched = plan.batched and sim == "grid" and act != FIXED
             worlds: list[Any] = list(plan.sim_sizes.get(sim, plan.sizes))
-            worlds += plan.sites
+            worlds += plan.sim_sites.get(sim, plan.sites)
             for size in worlds:
                 seeds = scenario_seeds(_grid_size(size), episodes)
                 parts = max(1, workers if batched else 2 * workers)
