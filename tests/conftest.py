@@ -13,11 +13,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 
 import pirl  # noqa: F401  (registers pirl/VCPP-v0)
 from pirl.world.state import Scenario
 
 EMPTY = np.zeros((0, 4))
+
+# One torch thread per test process, as the product's own training and evaluation set it
+# (ppo.torch_threads, evaluation workers). `make test` runs one test worker per core; torch's
+# default of one thread per core in each worker makes them spin against each other: fitting
+# a small student (test_advice_quality's kappa gate) took 2 s with one thread and 10 s with
+# two on a loaded 2-core machine (82 s inside the full suite). A test that wants more threads
+# sets them itself; subprocesses are unaffected.
+torch.set_num_threads(1)
 
 
 def scenario(
