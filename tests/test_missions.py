@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,24 @@ from cli_checks import one_error_line
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPUS = ROOT / "examples" / "sites" / "campus"
+
+
+@pytest.fixture(scope="module")
+def ewri_runs(tmp_path_factory) -> dict[int, Path]:
+    """PPO-EWRI runs of test.yaml at 256 steps, seeds 0 and 1, trained once for this module
+    (in process: `pirl train` itself is tested elsewhere); tests copy them before use."""
+    from pirl.agents.train import train
+    from pirl.config.run import RunConfig
+
+    root = tmp_path_factory.mktemp("ewri")
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
+        train={"total_steps": 256}
+    )
+    runs = {}
+    for seed in (0, 1):
+        runs[seed] = root / f"ppo-ewri-s{seed}"
+        train("ppo-ewri", cfg, runs[seed], seed=seed, show_progress=False)
+    return runs
 
 
 def pirl(*args: str) -> subprocess.CompletedProcess:
@@ -179,11 +198,9 @@ def test_mavsdk_imports_the_plan_and_an_autopilot_receives_every_item(tmp_path: 
         assert all(same(a, b) for a, b in zip(p[:4], recv["params"], strict=True))
 
 
-def test_a_trained_policy_plans_with_its_own_label(tmp_path: Path) -> None:
+def test_a_trained_policy_plans_with_its_own_label(tmp_path: Path, ewri_runs) -> None:
     run = tmp_path / "run"
-    trained = pirl("train", "--method", "ppo-ewri", "--config", "test", "--steps", "256",
-                   "--out", str(run))  # fmt: skip
-    assert trained.returncode == 0, trained.stderr
+    shutil.copytree(ewri_runs[0], run)
     out = tmp_path / "m"
     proc = pirl("plan", "--size", "15", "15", "3", "--policy", str(run), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
@@ -264,7 +281,7 @@ def test_sorties_fly_in_order_and_bad_folders_are_one_line(tmp_path: Path) -> No
 
 
 def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_mission(
-    tmp_path: Path,
+    tmp_path: Path, ewri_runs
 ) -> None:
     import numpy as np
 
@@ -279,9 +296,7 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
     runs = []
     for seed in (0, 1):
         run = tmp_path / f"ppo-ewri-s{seed}"
-        trained = pirl("train", "--method", "ppo-ewri", "--config", "test", "--steps", "256",
-                       "--seed", str(seed), "--out", str(run))  # fmt: skip
-        assert trained.returncode == 0, trained.stderr
+        shutil.copytree(ewri_runs[seed], run)
         runs.append(run)
     # The evaluation's records name the better run on the site: it is the one flown.
     records = [
