@@ -244,14 +244,15 @@ def test_teacher_dataset_in_an_unusable_place_lives_in_memory(tmp_path, capsys):
 
 
 # -- 3. one writer per folder ----------------------------------------------------------------
-def _hold_lock(folder: Path) -> subprocess.Popen:
+def _hold_lock(*folders: Path) -> subprocess.Popen:
+    """One process that holds the write lock of each of ``folders`` until killed."""
     code = (
         "import sys, time; from pathlib import Path; from pirl.agents.run_folder import "
-        "lock_folder; p = Path(sys.argv[1]); p.mkdir(parents=True, exist_ok=True); "
-        "lock_folder(p); print('locked', flush=True); time.sleep(600)"
+        "lock_folder\nfor a in sys.argv[1:]:\n p = Path(a); p.mkdir(parents=True, "
+        "exist_ok=True); lock_folder(p)\nprint('locked', flush=True); time.sleep(600)"
     )
-    holder = subprocess.Popen([sys.executable, "-c", code, str(folder)], stdout=subprocess.PIPE,
-                              text=True)  # fmt: skip
+    holder = subprocess.Popen([sys.executable, "-c", code, *map(str, folders)],
+                              stdout=subprocess.PIPE, text=True)  # fmt: skip
     assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
     return holder
 
@@ -286,19 +287,14 @@ def test_second_training_writer_is_refused_with_the_holders_pid(tmp_path):
 def test_evaluate_reproduce_and_distill_are_one_writer_too(tmp_path):
     env = _env(tmp_path)
     out = tmp_path / "ev"
-    holder = _hold_lock(out)
+    student = tmp_path / "student"
+    holder = _hold_lock(out, tmp_path / "student.tmp")  # one holder process for both
     try:
         proc = _pirl("evaluate", "--methods", "boustrophedon", "--sizes", "16", "--episodes",
                      "1", "--out", str(out), "--overwrite", cwd=tmp_path, env=env)  # fmt: skip
         assert f"PID {holder.pid}" in _error_line(proc)
         proc = _pirl("reproduce", "--config", "test", "--out", str(out), cwd=tmp_path, env=env)
         assert f"PID {holder.pid}" in _error_line(proc)
-    finally:
-        holder.kill()
-        holder.wait()
-    student = tmp_path / "student"
-    holder = _hold_lock(tmp_path / "student.tmp")
-    try:
         proc = _pirl("distill", "--teacher", "oracle", "--states", "10", "--config", "test",
                      "--out", str(student), cwd=tmp_path, env=env)  # fmt: skip
         assert f"PID {holder.pid}" in _error_line(proc)
