@@ -352,6 +352,7 @@ def train(
         done = run.finished_steps()
         if done is not None and done >= cfg.train.total_steps:
             log(f"{out} is already complete ({done:,} steps); give a larger --steps to extend it")
+            release_folder(run.path)
             return run.path / "model.zip"
     total = whole_steps(cfg, cfg.train.total_steps)
     if total != cfg.train.total_steps:
