@@ -16,16 +16,18 @@ import os
 import random
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
-from stable_baselines3 import PPO
-from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl.config import safe_state
 from pirl.config.errors import ConfigError
-from pirl.env.vec_env import VCPPVecEnv
+
+if TYPE_CHECKING:  # SB3 brings torch: reading a run folder needs neither
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from pirl.env.vec_env import VCPPVecEnv
 
 
 def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:
@@ -45,7 +47,7 @@ def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None)
             "episode_lengths": monitor.episode_lengths.copy(),
             "episode_count": monitor.episode_count,
         },
-        "torch_rng": torch.get_rng_state(),
+        "torch_rng": _torch().get_rng_state(),
         "numpy_rng": np.random.get_state(),
         "python_rng": random.getstate(),
     }
@@ -71,7 +73,7 @@ def restore(
     monitor.episode_count = state["monitor"]["episode_count"]
     if pare is not None and "pare" in state:
         pare.load_state_dict(state["pare"])
-    torch.set_rng_state(state["torch_rng"])
+    _torch().set_rng_state(state["torch_rng"])
     np.random.set_state(state["numpy_rng"])
     random.setstate(state["python_rng"])
 
@@ -170,3 +172,11 @@ def _atomic_text(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
+
+
+def _torch():
+    # Imported when a checkpoint is taken or restored: a command that only reads a run
+    # folder (and every refused one) starts without torch's 1.4 s import.
+    import torch
+
+    return torch

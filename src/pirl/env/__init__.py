@@ -1,8 +1,31 @@
 """The VCPP environments: single (Gymnasium), batched as a Gymnasium vector env and as a
-Stable-Baselines3 VecEnv; all three run the same :class:`~pirl.env.core.EnvCore`."""
+Stable-Baselines3 VecEnv; all three run the same :class:`~pirl.env.core.EnvCore`.
 
-from pirl.env.vcpp_env import VCPPEnv
-from pirl.env.vec_env import VCPPVecEnv, make_vec_env
-from pirl.env.vector import VCPPVectorEnv
+The names are imported on first use: the SB3 adapter brings Stable-Baselines3 and torch
+(about 1.5 s), which a command that only checks its options or reads the core never needs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __all__ = ["VCPPEnv", "VCPPVecEnv", "VCPPVectorEnv", "make_vec_env"]
+
+_LAZY = {
+    "VCPPEnv": "pirl.env.vcpp_env",
+    "VCPPVecEnv": "pirl.env.vec_env",
+    "make_vec_env": "pirl.env.vec_env",
+    "VCPPVectorEnv": "pirl.env.vector",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pirl.env' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

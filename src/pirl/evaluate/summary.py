@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
@@ -55,6 +54,8 @@ def mean_ci95(values: Iterable[float]) -> tuple[float, float]:
         return math.nan, math.nan
     if x.size == 1:
         return float(x[0]), math.nan
+    from scipy import stats  # half a second to import: only where intervals are computed
+
     half = stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)
     return float(x.mean()), float(half)
 
