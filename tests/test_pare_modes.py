@@ -28,7 +28,8 @@ from pirl.advice.student import (
 )
 from pirl.agents.loading import load_model
 from pirl.agents.pirl_advice import build_pirl_advice, pirl_label
-from pirl.agents.train import TrainingStopped, train
+from pirl.agents.stops import TrainingStopped
+from pirl.agents.train import train
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.env import make_vec_env

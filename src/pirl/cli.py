@@ -304,7 +304,7 @@ def reproduce(
     from rich.progress import Progress
 
     from pirl.agents.run_folder import folder_lock
-    from pirl.agents.train import TrainingInterrupted
+    from pirl.agents.stops import TrainingInterrupted
     from pirl.config.run import RunConfig
     from pirl.evaluate.plan import check_reproduce, make_plan
     from pirl.evaluate.reproduce import run_reproduction
@@ -408,7 +408,7 @@ def train(
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
     from pirl.agents.runs import train_run
-    from pirl.agents.train import TrainingInterrupted, TrainingStopped
+    from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 
     try:
         result = train_run(

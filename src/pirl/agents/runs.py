@@ -114,8 +114,6 @@ def train_run(
     refused (an unknown method or advisor, a missing key, an impossible layout, a missing
     expert, a student without student mode) is refused before the run folder is made.
     """
-    from pirl.agents.train import train
-
     entry = trained_method(method, "--method")
     entry.check_options(expert=expert, advisor=advisor, student=student)
     if seed is not None:
@@ -157,6 +155,8 @@ def train_run(
     if student is not None and (not entry.advised or cfg.pare.mode != "student"):
         advised = " or ".join(m.name for m in METHODS.values() if m.advised)
         raise ConfigError(f"--student needs --method {advised} with pare.mode student")
+    from pirl.agents.train import train  # torch and SB3: only once everything is checked
+
     return train(method, cfg, out, seed=seed, resume=resume, student=None if resume else student)
 
 

@@ -44,6 +44,7 @@ from pirl.agents.run_folder import (
     train_seed_base,
 )
 from pirl.agents.schedules import learning_rate_of
+from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
@@ -459,23 +460,6 @@ def _finish(
 def _warn(line: str) -> None:
     """Warnings go to stderr, with or without the progress display."""
     print(line, file=sys.stderr, flush=True)
-
-
-class TrainingStopped(Exception):
-    """Training stopped for a reason the user must fix (an advisor that keeps failing);
-    ``checkpoint`` is the resumable state saved (or None)."""
-
-    def __init__(self, reason: str, saved: Path | None) -> None:
-        super().__init__(reason)
-        self.reason, self.checkpoint = reason, saved
-
-
-class TrainingInterrupted(Exception):
-    """Ctrl-C during training; ``checkpoint`` is where the state was saved (or None)."""
-
-    def __init__(self, saved: Path | None) -> None:
-        super().__init__(f"interrupted; checkpoint: {saved}")
-        self.checkpoint = saved
 
 
 def _advisor_stats(pare: Any, advisor: Any) -> dict[str, Any]:

@@ -267,7 +267,7 @@ class InlineExecutor:
         return None
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
-        from pirl.agents.train import TrainingInterrupted
+        from pirl.agents.stops import TrainingInterrupted
 
         future: Future = Future()
         try:
