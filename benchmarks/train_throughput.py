@@ -31,8 +31,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecMonitor
 
 from pirl.advice.factory import make_advisor
+from pirl.agents.methods import ADVISED
 from pirl.agents.pirl_advice import build_pirl_advice
-from pirl.agents.train import build_env_stack, build_ppo
+from pirl.agents.train import build_env_stack, build_ppo, resolved_config
 from pirl.config.run import RunConfig
 from pirl.env import VCPPEnv, make_vec_env
 
@@ -160,7 +161,7 @@ def main() -> None:
         # Cold cache: every prompt reaches the LLM, which runs in its own process as in training.
         advisor = make_advisor(args.advisor, cfg, cache=False, process=True)
         advice = build_pirl_advice(cfg, advisor, probe=False)
-        stack = build_env_stack("pirl", cfg, seed=0, advice=advice)
+        stack = build_env_stack(resolved_config(ADVISED.name, cfg), seed=0, advice=advice)
         pirl_row = run_case(
             f"PIRL ({args.advisor}, {args.mode})", stack.pare, cfg, args.steps, stack.pare
         )
