@@ -7,6 +7,7 @@ start cell and wind seed, with wind off unless asked.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -16,7 +17,14 @@ import pytest
 import torch
 
 import pirl  # noqa: F401  (registers pirl/VCPP-v0)
+from pirl._paths import cache_root
 from pirl.world.state import Scenario
+
+# Compiled kernels are shared by every test process and the `pirl` subprocesses tests start.
+# Those subprocesses get a cache folder of their own (PIRL_CACHE_DIR, to test the advice
+# cache and datasets), which would put numba's cache there too: each compiled the world's
+# kernels again, ~22 of the 29 s of a `pirl train --config test`.
+os.environ.setdefault("PIRL_NUMBA_CACHE", str(cache_root() / "numba"))
 
 EMPTY = np.zeros((0, 4))
 
