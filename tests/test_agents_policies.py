@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pirl.advice.base import Advisor, Answer
@@ -84,6 +85,11 @@ def test_ppo_and_il_runs_load_as_policies(tmp_path):
     ppo, il = load_policy(expert), load_policy(tmp_path / "il")
     assert isinstance(ppo, PPOPolicy) and ppo.label == "PPO-EWRI"
     assert isinstance(il, TabNetPolicy)
+    # Its probabilities are TabNet's own predict_proba, exactly, over several batches.
+    obs = np.random.default_rng(0).random((7, il.obs_size), dtype=np.float32)
+    il.model.batch_size = 3
+    own = il.model.predict_proba(obs)
+    assert np.array_equal(il.probabilities(obs)[:, own_columns(il)], own)
     for policy in (ppo, il, load_policy("boustrophedon"), load_policy("random", seed=1)):
         metrics = run_episode(env, policy, seed=11).metrics
         assert 0.0 <= metrics["vcr"] <= 1.0
@@ -96,3 +102,9 @@ def test_ppo_and_il_runs_load_as_policies(tmp_path):
         load_policy("ppo-magic")
     with pytest.raises(ConfigError, match="needs an advisor"):
         load_policy("llm-only")
+
+
+def own_columns(policy: TabNetPolicy) -> list[int]:
+    """The actions behind the columns of TabNet's own predict_proba."""
+    n = len(policy.model.preds_mapper)
+    return [int(policy.model.preds_mapper[str(k)]) for k in range(n)]

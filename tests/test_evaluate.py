@@ -262,3 +262,39 @@ def test_a_run_is_evaluated_only_with_its_own_observation(trained_runs, tmp_path
     with pytest.raises(ConfigError, match="obs_target_path=False.*train it again"):
         evaluate(plan, tmp_path / "eval")
     assert not (tmp_path / "eval" / "episodes.jsonl").exists()
+
+
+@pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")
+def test_pairwise_improvement_is_rliables_probability_of_improvement():
+    """The metric the report bootstraps equals rliable's own on random and tied scores, and
+    so do the point estimate and interval of a bootstrap with either."""
+    import numpy as np
+    from rliable import library, metrics
+
+    from pirl.evaluate.summary import (
+        interval_estimates,
+        pairwise_improvement,
+        probability_of_improvement,
+    )
+
+    rng = np.random.default_rng(0)
+    for runs_x, runs_y, tasks in ((3, 3, 1), (2, 5, 4), (6, 4, 3)):
+        x = rng.integers(0, 4, (runs_x, tasks)) / 4  # few values: many ties
+        y = rng.integers(0, 4, (runs_y, tasks)) / 4
+        for a, b in ((x, y), (y, x), (x, x), (x + 0.3, y)):
+            assert pairwise_improvement(a, b) == pytest.approx(
+                metrics.probability_of_improvement(a, b), abs=1e-12
+            )
+    # rliable resamples with NumPy's global generator whatever random_state it is given:
+    # seeded alike, its bootstrap and ours give the same interval, and ours gives it on
+    # every call, whatever the global generator did in between.
+    np.random.seed(0)
+    point, ci = library.get_interval_estimates(
+        {"xy": (x, y)}, metrics.probability_of_improvement, reps=200,
+        random_state=np.random.RandomState(0),
+    )  # fmt: skip
+    ours = probability_of_improvement(x, y, reps=200)
+    assert ours == pytest.approx((point["xy"], *np.ravel(ci["xy"])[:2]), abs=1e-12)
+    np.random.seed(123)
+    assert probability_of_improvement(x, y, reps=200) == ours
+    assert interval_estimates(x) == interval_estimates(x)
