@@ -304,10 +304,15 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
          "source": str(run), "vcr": vcr}
         for k, (run, vcr) in enumerate(zip(runs, (0.4, 0.6), strict=True))
     ]  # fmt: skip
-    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
-    title, table, figure = reproduction_missions(
-        cfg, tmp_path / "out", [str(site)], records, log=lambda _m: None
+    # Two workers, as the demo flies them: each mission in a process of its own.
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
+        reproduce={"workers": 2}
     )
+    logs: list[str] = []
+    title, table, figure = reproduction_missions(
+        cfg, tmp_path / "out", [str(site)], records, log=logs.append
+    )
+    assert "in 2 processes" in logs[0] and any("flying block-learned" in line for line in logs)
     missions = tmp_path / "out" / "missions"
     assert sorted(p.name for p in missions.iterdir()) == ["block-learned", "block-planner"]
     learned = json.loads((missions / "block-learned" / "summary.json").read_text())

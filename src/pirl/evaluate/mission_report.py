@@ -70,6 +70,17 @@ def _mission(
     return {"folder": folder, "summary": summary, "flown": flown}
 
 
+def _mission_in_worker(
+    cfg: RunConfig, folder: Path, site: str, policy: Path | None, method: str | None
+) -> tuple[dict[str, Any], list[str]]:
+    """:func:`_mission` in a pool's worker: its entry and the lines it would have logged."""
+    import torch
+
+    torch.set_num_threads(1)
+    lines: list[str] = []
+    return _mission(cfg, folder, site, lines.append, policy, method), lines
+
+
 def reproduction_missions(
     cfg: RunConfig,
     out: Path,
@@ -77,25 +88,45 @@ def reproduction_missions(
     records: list[dict[str, Any]],
     log: Callable[[str], Any] = print,
 ) -> tuple[str, Table, Path] | None:
-    """Write and fly the planner's and the best learned policy's mission on every site; the
+    """Write and fly the planner's and the best learned policy's mission on every site, in up
+    to ``reproduce.workers`` processes (each flight is one PyFlyt process's work); the
     report's (title, table, figure)."""
     if not sites:
         return None
     act = cfg.reproduce.headline_act
-    rows = []
+    # (site, folder, policy, method, why this policy) per mission, in the table's order
+    jobs: list[tuple[str, Path, Path | None, str | None, str | None]] = []
     for site in sites:
         name = Path(site).name
-        entries = [
-            _mission(cfg, out / "missions" / f"{name}-planner", site, log, method=PLANNER.name)
-        ]
+        jobs.append((site, out / "missions" / f"{name}-planner", None, PLANNER.name, None))
         best = best_run(records, name, act)
         if best is not None:
-            folder = out / "missions" / f"{name}-learned"
-            entry = _mission(cfg, folder, site, log, policy=best[0])
-            entry["chosen"] = f"best mean grid VCR on {name} acting {act}: {best[1]:.3f}"
-            entries.append(entry)
-        rows.append((name, site, entries))
-    return "Missions", section(rows, out / "report"), figure(rows, out / "report" / "missions.png")
+            chosen = f"best mean grid VCR on {name} acting {act}: {best[1]:.3f}"
+            jobs.append((site, out / "missions" / f"{name}-learned", best[0], None, chosen))
+    workers = min(cfg.reproduce.workers, len(jobs))
+    if workers > 1:
+        from pirl.evaluate.runner import process_pool
+
+        names = ", ".join(folder.name for _, folder, *_ in jobs)
+        log(f"missions: writing and flying {names} in {workers} processes")
+        with process_pool(workers) as pool:
+            futures = [pool.submit(_mission_in_worker, cfg, f, s, p, m) for s, f, p, m, _ in jobs]
+            entries = []
+            for future in futures:
+                entry, lines = future.result()
+                for line in lines:
+                    log(line)
+                entries.append(entry)
+    else:
+        entries = [_mission(cfg, f, s, log, p, m) for s, f, p, m, _ in jobs]
+    rows: dict[str, tuple[str, str, list[dict[str, Any]]]] = {}
+    for (site, _, _, _, chosen), entry in zip(jobs, entries, strict=True):
+        if chosen is not None:
+            entry["chosen"] = chosen
+        rows.setdefault(site, (Path(site).name, site, []))[2].append(entry)
+    table_rows = list(rows.values())
+    report = out / "report"
+    return "Missions", section(table_rows, report), figure(table_rows, report / "missions.png")
 
 
 def section(rows: list[tuple[str, str, list[dict[str, Any]]]], report: Path) -> Table:
