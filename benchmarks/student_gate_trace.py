@@ -33,6 +33,8 @@ RULES = {
     "best field kappa 0.10, closes below 0.05": ("best_kappa", 0.10, 0.05, 20),
     "best field kappa 0.15, closes below 0.075": ("best_kappa", 0.15, 0.075, 20),
     "best field kappa 0.20, closes below 0.10": ("best_kappa", 0.20, 0.10, 20),
+    "kappa - 3 SE >= 0.02, closes below 0.01": ("kappa_lcb", 0.02, 0.01, 20),
+    "kappa - 3 SE >= 0.0, closes below -0.05": ("kappa_lcb", 0.0, -0.05, 20),
 }
 
 
@@ -160,7 +162,7 @@ def replay_dataset(args: argparse.Namespace) -> None:
     results: dict[tuple[str, str], list[tuple[float, int, int]]] = {}
     per_boundary = args.rollout // 16  # the board counts vector steps (16 worlds)
     for source in sorted(sources):
-        found = re.search(r"accuracy([0-9.]+)-.*-s(\d+)$", source)
+        found = re.search(r"acc(?:uracy)?([0-9.]+)-.*s(\d+)$", source)
         if not found or float(found.group(1)) not in args.replay_accuracies:
             continue
         if args.replay_seeds and int(found.group(2)) not in args.replay_seeds:

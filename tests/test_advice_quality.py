@@ -18,7 +18,7 @@ from chat_server import ChatServer
 from pirl.advice.oracle import MOVES, OracleAdvisor, degraded, oracle_label
 from pirl.advice.prompt import PromptState, build_prompt, prompt_id
 from pirl.advice.recommendation import Recommendation
-from pirl.advice.student import Student, StudentScore
+from pirl.advice.student import Student, StudentScore, gate_value
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 
@@ -242,6 +242,26 @@ def test_the_kappa_gate_lets_a_noisy_teacher_in_and_keeps_a_constant_one_out():
     assert constant_student.score.agreement == 1.0 and constant_student.passes(0.8, "agreement")
     assert constant_student.score.informative == () and constant_student.score.kappa == 0.0
     assert not constant_student.passes(0.1, "kappa")
+    # The lower bound: the informed student's kappa less three standard errors, still above 0;
+    # the constant teacher's student has nothing to bound.
+    se = informed.score.kappa_se
+    assert 0 < se < 0.1
+    assert gate_value(informed.score, "kappa_lcb") == pytest.approx(informed.score.kappa - 3 * se)
+    assert informed.passes(0.02, "kappa_lcb") and not constant_student.passes(0.0, "kappa_lcb")
+
+
+def test_kappa_error_is_cohens_large_sample_error():
+    from pirl.advice.student import cohen_kappa, kappa_error
+
+    truth = np.array([0, 0, 1, 1, 2, 2, 0, 1, 2, 0])
+    pred = np.array([0, 0, 1, 2, 2, 2, 1, 1, 2, 0])
+    observed, n = 0.8, 10
+    chance = (np.bincount(pred, minlength=3) / n) @ (np.bincount(truth, minlength=3) / n)
+    assert cohen_kappa(pred, truth, 3) == pytest.approx((observed - chance) / (1 - chance))
+    assert kappa_error(pred, truth, 3) == pytest.approx(
+        np.sqrt(observed * (1 - observed) / n) / (1 - chance)
+    )
+    assert kappa_error(pred[:0], truth[:0], 3) == 1.0
 
 
 def test_the_unshaped_warning_says_when_a_teacher_carries_no_information():

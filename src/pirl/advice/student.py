@@ -26,6 +26,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import math
 import os
 import sqlite3
 import time
@@ -68,16 +69,35 @@ CONSTANT_SHARE = 0.9
 matching it says nothing about the state."""
 
 
+def _agreement_and_chance(
+    pred: np.ndarray, truth: np.ndarray, n_classes: int
+) -> tuple[float, float]:
+    """Observed agreement of two label vectors, and the agreement their label frequencies give
+    at random."""
+    observed = float((pred == truth).mean())
+    p_pred = np.bincount(pred, minlength=n_classes) / len(pred)
+    p_true = np.bincount(truth, minlength=n_classes) / len(truth)
+    return observed, float((p_pred * p_true).sum())
+
+
 def cohen_kappa(pred: np.ndarray, truth: np.ndarray, n_classes: int) -> float:
     """Cohen's kappa of two label vectors: (agreement - chance) / (1 - chance), with chance
     the agreement their label frequencies give at random; 0 when chance is 1."""
     if not len(truth):
         return 0.0
-    observed = float((pred == truth).mean())
-    p_pred = np.bincount(pred, minlength=n_classes) / len(pred)
-    p_true = np.bincount(truth, minlength=n_classes) / len(truth)
-    chance = float((p_pred * p_true).sum())
+    observed, chance = _agreement_and_chance(pred, truth, n_classes)
     return 0.0 if chance >= 1.0 - 1e-12 else (observed - chance) / (1.0 - chance)
+
+
+def kappa_error(pred: np.ndarray, truth: np.ndarray, n_classes: int) -> float:
+    """Large-sample standard error of :func:`cohen_kappa`: sqrt(p_o (1 - p_o) / n) / (1 - p_e)
+    (Cohen 1960); 1 when there is nothing to measure it on."""
+    if not len(truth):
+        return 1.0
+    observed, chance = _agreement_and_chance(pred, truth, n_classes)
+    if chance >= 1.0 - 1e-12:
+        return 1.0
+    return math.sqrt(observed * (1.0 - observed) / len(truth)) / (1.0 - chance)
 
 
 def student_features(obs: np.ndarray, world: WorldBatch, worlds: Sequence[int]) -> np.ndarray:
@@ -300,9 +320,17 @@ class StudentScore:
     """The fields on which both the teacher's held-out answers and the student's predictions
     vary (no single value takes more than :data:`CONSTANT_SHARE` of either). None: what the
     student learned carries no state information."""
+    kappa_se: float = 1.0
+    """Standard error of :attr:`kappa`: the mean over informative fields of each field's
+    large-sample error, sqrt(p_o (1 - p_o) / n) / (1 - p_e) (the mean, not the root of the
+    summed squares, because the fields of one answer are not independent); 1 when no field is
+    informative or nothing was scored."""
 
 
 MOVE_FIELDS = ("dx", "dy", "dz")
+KAPPA_Z = 3.0
+"""Standard errors below its kappa that a student's lower bound (``kappa_lcb``) sits: one-sided,
+about one chance in 700 that a student which learned nothing of its teacher passes a check."""
 
 
 def gate_value(score: StudentScore, on: str) -> float:
@@ -312,6 +340,8 @@ def gate_value(score: StudentScore, on: str) -> float:
     if on == "move_kappa":  # the move fields only: the camera fields' noise left out
         ks = [score.per_field_kappa[f] for f in score.informative if f in MOVE_FIELDS]
         return float(np.mean(ks)) if ks else 0.0
+    if on == "kappa_lcb":  # kappa's lower bound: what the held-out answers can vouch for
+        return score.kappa - KAPPA_Z * score.kappa_se
     if on == "best_kappa":  # the field the student learned best
         return max((score.per_field_kappa[f] for f in score.informative), default=0.0)
     return score.agreement
@@ -441,7 +471,7 @@ class Student:
         pred = self.predict_labels(self._x[held])
         truth = self._y[held]
         per_field = {f: float((pred[:, k] == truth[:, k]).mean()) for k, f in enumerate(FIELDS)}
-        majority, kappas, informative = [], {}, []
+        majority, kappas, informative, errors = [], {}, [], []
         for k, name in enumerate(FIELDS):
             n = len(CLASSES[k])
             common = np.bincount(self._y[train, k], minlength=n).argmax()
@@ -455,10 +485,12 @@ class Student:
             kappas[name] = cohen_kappa(pred[:, k], truth[:, k], n) if varies else 0.0
             if varies:
                 informative.append(name)
+                errors.append(kappa_error(pred[:, k], truth[:, k], n))
         kappa = float(np.mean([kappas[f] for f in informative])) if informative else 0.0
         return StudentScore(
             float(np.mean(list(per_field.values()))), float(np.mean(majority)), len(held),
             per_field, kappa, kappas, tuple(informative),
+            float(np.mean(errors)) if errors else 1.0,
         )  # fmt: skip
 
     def gate_after_fit(self, was_open: bool, gate: float, close: float, on: str) -> bool:

@@ -199,7 +199,9 @@ class PareSettings(Settings, section="pare"):
         self.require_choice("mode", ("student", "sync", "async"))
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
             self.require_choice("prompt_variant", ("paper", "compact"))
-        self.require_choice("student_gate_on", ("kappa", "move_kappa", "best_kappa", "agreement"))
+        self.require_choice(
+            "student_gate_on", ("kappa", "kappa_lcb", "move_kappa", "best_kappa", "agreement")
+        )
         self.require_choice("student_dataset_scope", ("shared", "run"))
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
