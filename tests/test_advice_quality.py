@@ -319,3 +319,13 @@ def test_an_open_gate_closes_only_below_its_hysteresis():
     assert not student.gate_after_fit(True, 0.1, 0.05, "kappa")
     cfg = RunConfig().pare
     assert cfg.gate_close() == pytest.approx(cfg.student_kappa_gate * cfg.student_gate_close)
+
+
+def test_the_price_counts_the_calls_of_a_closed_gate():
+    from pirl.evaluate.advice_score import run_calls
+
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "quick.yaml")
+    head = cfg.reproduce.teacher_phase_answers
+    base = run_calls(cfg, "local") - head
+    boosted = run_calls(cfg.with_overrides(pare={"student_closed_rate": 3.0}), "local") - head
+    assert base > 0 and boosted == pytest.approx(3 * base, abs=3)

@@ -187,6 +187,32 @@ def test_refits_become_rarer_once_the_student_has_passed_its_gate(tmp_path, grow
     pare.close()
 
 
+def test_a_closed_gate_asks_the_teacher_more_often_until_it_opens(tmp_path):
+    sent = {}
+    for closed_rate in (1.0, 4.0):  # too few answers for the gate to open in 40 steps
+        pare = _student_pare(tmp_path / str(closed_rate), OracleAdvisor(), teacher_rate=0.02,
+                             closed_rate=closed_rate)  # fmt: skip
+        pare.reset()
+        for _ in range(40):
+            pare.step(np.zeros(pare.num_envs, dtype=np.int64))
+        st = pare.stats.as_dict()
+        assert st["gate_passed_at_step"] < 0
+        sent[closed_rate] = st["prompts_sent"] + st["answers_in_flight"] + st["teacher_waiting"]
+        pare.close()
+    assert sent[4.0] == pytest.approx(4 * sent[1.0], abs=2) and sent[1.0] >= 3
+    # Once the gate opens, the teacher is back to its own rate.
+    pare = _student_pare(tmp_path / "opens", OracleAdvisor(), closed_rate=4.0)
+    source = pare.pare.source
+    assert source.teacher.rate == pytest.approx(2.0)
+    pare.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(160):
+        pare.step(rng.integers(0, 12, pare.num_envs))
+    assert pare.stats.as_dict()["gate_passed_at_step"] > 0 and source.open
+    assert source.teacher.rate == pytest.approx(0.5)
+    pare.close()
+
+
 def test_student_gate_keeps_steps_unshaped_until_agreement(tmp_path):
     # Too few held-out answers (a teacher call every ~100 steps) for any gate to pass.
     pare = _student_pare(tmp_path, OracleAdvisor(), gate=1.0, teacher_rate=0.01)

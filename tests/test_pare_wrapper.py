@@ -61,13 +61,14 @@ def make_pare(
     teacher_batch: int = 16,
     max_failure_rate: float = 0.5,
     failure_window: int = 200,
+    closed_rate: float = 1.0,
 ) -> PAREVecEnv:
     """PARE over ``venv`` as training builds it, from a pare settings section."""
     settings = PareSettings(
         mode=mode, query_every=query_every, timeout_s=timeout_s, student_gate=gate,
         student_fit_steps=fit_steps, student_refit_growth=refit_growth,
         student_wait_teacher=wait_teacher, max_failure_rate=max_failure_rate,
-        failure_window=failure_window,
+        failure_window=failure_window, student_closed_rate=closed_rate,
     )  # fmt: skip
     advice = AdviceBundle(advisor, student, dataset, teacher_rate, teacher_batch, "")
     return PAREVecEnv.from_settings(venv, settings, advice, refit_every=refit_every)

@@ -153,6 +153,12 @@ class PareSettings(Settings, section="pare"):
     share of the threshold that opened it (1 = no hysteresis). A noisy teacher's kappa,
     measured on a few hundred held-out answers, wanders around the threshold from refit to
     refit; without hysteresis its shaping switched on and off (docs/advice.md)."""
+    student_closed_rate: float = 1.0
+    """Student mode: while the student's gate is closed the teacher is asked this many times
+    as often (its rate times this), so a student still short of its gate gets more answers to
+    learn from; back to the rate once it opens. 1 = always the rate. It costs an LLM
+    teacher's calls only while its student has not passed (the price counts them as if the
+    gate never opened)."""
     student_fit_steps: int = 100
     """Student mode: Adam steps per refit (at rollout boundaries with new teacher answers)."""
     student_refit_growth: float = 0.25
@@ -211,6 +217,8 @@ class PareSettings(Settings, section="pare"):
                 raise self.refuse(key, "must be in [0, 1]")
         if self.student_refit_growth < 0:
             raise self.refuse("student_refit_growth", "must be >= 0")
+        if self.student_closed_rate < 1:
+            raise self.refuse("student_closed_rate", "must be >= 1 (a multiple of the rate)")
 
 
 @dataclass(frozen=True)

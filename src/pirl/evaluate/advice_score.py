@@ -91,7 +91,8 @@ class RunPrice:
 
     profile: str
     calls: int
-    """LLM calls: the teacher's (student mode: teacher_rate x steps) plus the head start, or
+    """LLM calls: the teacher's (student mode: teacher_rate x steps, x student_closed_rate as
+    if the gate never opened) plus the head start, or
     one per world every query_every steps (sync and async)."""
     tokens_in: int
     tokens_out: int
@@ -265,8 +266,9 @@ def score_advisor(
 
 def run_calls(cfg: RunConfig, advisor: str) -> int:
     """LLM calls one PIRL run of ``cfg`` makes with ``advisor``: in student mode its teacher
-    rate times the run's steps plus the profile's head start (LLM teachers only); otherwise
-    one answer per world every ``pare.query_every`` steps."""
+    rate times the run's steps (times ``pare.student_closed_rate``, as if the student's gate
+    never opened: the most it can ask) plus the profile's head start (LLM teachers only);
+    otherwise one answer per world every ``pare.query_every`` steps."""
     from pirl.advice.registry import advisor_kind
     from pirl.agents.runs import method_steps
 
@@ -275,7 +277,8 @@ def run_calls(cfg: RunConfig, advisor: str) -> int:
     p = cfg.pare
     if p.mode == "student":
         head_start = int(cfg.reproduce.teacher_phase_answers) if kind.llm else 0
-        return int(math.ceil(kind.teacher_rate(cfg) * steps)) + head_start
+        rate = kind.teacher_rate(cfg) * p.student_closed_rate
+        return int(math.ceil(rate * steps)) + head_start
     return int(math.ceil(steps / p.query_every))
 
 

@@ -41,6 +41,8 @@ class StudentSource:
         refit_growth: once the student has passed its gate, refit only when the answers
             have grown by this share since the last fit (0: at every boundary with new
             answers).
+        closed_rate: the teacher's rate is this multiple of its own while the gate is
+            closed (``pare.student_closed_rate``).
         wait_teacher: collect the teacher's batch at each boundary (reproducible runs; PPO
             then waits for a slow teacher).
         timeout_s: the longest such wait.
@@ -62,6 +64,7 @@ class StudentSource:
         refit_growth: float = 0.0,
         wait_teacher: bool = False,
         timeout_s: float = 120.0,
+        closed_rate: float = 1.0,
     ) -> None:
         self.board, self.health, self.stats = board, health, health.stats
         self.student, self.dataset, self.teacher = student, dataset, teacher
@@ -73,7 +76,13 @@ class StudentSource:
         self.refit_every = int(refit_every)
         self.fit_steps, self.refit_growth = int(fit_steps), float(refit_growth)
         self.wait_teacher, self.timeout_s = bool(wait_teacher), float(timeout_s)
+        self.rate, self.closed_rate = teacher.rate, float(closed_rate)
+        self._set_rate()
         self._update_student_stats()
+
+    def _set_rate(self) -> None:
+        """The teacher's rate for the gate's state: more answers while the student is short."""
+        self.teacher.rate = self.rate * (1.0 if self.open else self.closed_rate)
 
     @classmethod
     def build(cls, setup: SourceSetup) -> StudentSource:
@@ -81,16 +90,17 @@ class StudentSource:
         if advice.student is None or advice.dataset is None:
             raise ConfigError("student mode needs a student and its teacher dataset")
         rate = advice.teacher_rate
+        most = rate * p.student_closed_rate  # the rate while the gate is closed
         teacher = TeacherQueue(
             setup.advisor, advice.dataset, advice.student.teacher, rate,
-            max_pending=max(64, int(2 * rate * setup.board.n * setup.refit_every) + 1),
+            max_pending=max(64, int(2 * most * setup.board.n * setup.refit_every) + 1),
             batch_size=advice.teacher_batch, prompt_variant=p.prompt_variant,
             seed=setup.seed, source=setup.source,
         )  # fmt: skip
         return cls(
             setup.board, setup.health, advice.student, advice.dataset, teacher, p.gate(),
             p.gate_close(), setup.refit_every, p.student_fit_steps, p.student_refit_growth,
-            p.student_wait_teacher, p.timeout_s,
+            p.student_wait_teacher, p.timeout_s, p.student_closed_rate,
         )  # fmt: skip
 
     # -- AdviceSource ---------------------------------------------------------------------
@@ -156,6 +166,7 @@ class StudentSource:
         self.student.load_state_dict(state["student"], self.dataset)
         self.teacher.load_state_dict(state["teacher"])
         self.open = bool(state.get("gate_open", self.student.passes(*self.gate)))
+        self._set_rate()
 
     def close(self) -> None:
         self.teacher.close()
@@ -190,6 +201,7 @@ class StudentSource:
         was_open = self.open
         self.open = student.gate_after_fit(was_open, self.gate[0], self.gate_close, self.gate[1])
         st.gate_closings += int(was_open and not self.open)
+        self._set_rate()
         self._update_student_stats()
         self.health.budget_spent_now()  # the student goes on alone
 
