@@ -322,10 +322,15 @@ def test_an_open_gate_closes_only_below_its_hysteresis():
 
 
 def test_the_price_counts_the_calls_of_a_closed_gate():
-    from pirl.evaluate.advice_score import run_calls
+    from pirl.evaluate.advice_score import price_run, run_calls
 
     cfg = RunConfig.from_yaml(ROOT / "configs" / "quick.yaml")
     head = cfg.reproduce.teacher_phase_answers
-    base = run_calls(cfg, "local") - head
-    boosted = run_calls(cfg.with_overrides(pare={"student_closed_rate": 3.0}), "local") - head
-    assert base > 0 and boosted == pytest.approx(3 * base, abs=3)
+    plain = cfg.with_overrides(pare={"student_closed_rate": 1.0})
+    base = run_calls(plain, "local") - head
+    boosted = cfg.with_overrides(pare={"student_closed_rate": 3.0})
+    assert base > 0 and run_calls(boosted, "local") - head == pytest.approx(3 * base, abs=3)
+    assert run_calls(boosted, "local", gate_open=True) == run_calls(plain, "local")
+    price = price_run(boosted, "local", "quick", 400.0, 20.0)
+    assert f"{base + head:,} to {run_calls(boosted, 'local'):,} LLM calls" in price.line()
+    assert "to" not in price_run(plain, "local", "quick", 400.0, 20.0).line().split(":")[1][:20]

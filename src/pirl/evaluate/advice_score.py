@@ -98,14 +98,23 @@ class RunPrice:
     tokens_out: int
     cost: float | None
     """In the currency of the prices given, None without prices."""
+    calls_gate_open: int = 0
+    """The calls when the student's gate opens at once (the teacher at its own rate); the
+    tokens and cost above are for :attr:`calls`, the most."""
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     def line(self) -> str:
         money = "" if self.cost is None else f", cost {self.cost:,.2f}"
+        calls = f"{self.calls:,} LLM calls"
+        if self.calls_gate_open and self.calls_gate_open != self.calls:
+            calls = (
+                f"{self.calls_gate_open:,} to {self.calls:,} LLM calls (the most while the "
+                "student's gate stays closed)"
+            )
         return (
-            f"price of one PIRL run of {self.profile}: {self.calls:,} LLM calls, "
+            f"price of one PIRL run of {self.profile}: {calls}, "
             f"{self.tokens_in:,} tokens in, {self.tokens_out:,} tokens out{money}"
         )
 
@@ -264,11 +273,12 @@ def score_advisor(
     )  # fmt: skip
 
 
-def run_calls(cfg: RunConfig, advisor: str) -> int:
+def run_calls(cfg: RunConfig, advisor: str, gate_open: bool = False) -> int:
     """LLM calls one PIRL run of ``cfg`` makes with ``advisor``: in student mode its teacher
     rate times the run's steps (times ``pare.student_closed_rate``, as if the student's gate
-    never opened: the most it can ask) plus the profile's head start (LLM teachers only);
-    otherwise one answer per world every ``pare.query_every`` steps."""
+    never opened: the most it can ask; ``gate_open``: the rate alone, the least) plus the
+    profile's head start (LLM teachers only); otherwise one answer per world every
+    ``pare.query_every`` steps."""
     from pirl.advice.registry import advisor_kind
     from pirl.agents.runs import method_steps
 
@@ -277,7 +287,7 @@ def run_calls(cfg: RunConfig, advisor: str) -> int:
     p = cfg.pare
     if p.mode == "student":
         head_start = int(cfg.reproduce.teacher_phase_answers) if kind.llm else 0
-        rate = kind.teacher_rate(cfg) * p.student_closed_rate
+        rate = kind.teacher_rate(cfg) * (1.0 if gate_open else p.student_closed_rate)
         return int(math.ceil(rate * steps)) + head_start
     return int(math.ceil(steps / p.query_every))
 
@@ -297,7 +307,7 @@ def price_run(
     cost = None
     if price_in is not None or price_out is not None:
         cost = (t_in * (price_in or 0.0) + t_out * (price_out or 0.0)) / 1e6
-    return RunPrice(profile, calls, t_in, t_out, cost)
+    return RunPrice(profile, calls, t_in, t_out, cost, run_calls(cfg, advisor, gate_open=True))
 
 
 def prompt_tokens_estimate(cfg: RunConfig) -> float:
