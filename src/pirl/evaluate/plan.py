@@ -407,16 +407,19 @@ def _run_job(
 # Rates on the 2-core development machine, one worker process each, shared with other jobs.
 # Measured (quick profile in 2 workers): PPO steps/s at quick's network (262,144
 # steps in 45 s: 5,800/s; 5,000 leaves room for a busy machine), PIRL's cost against PPO in
-# student mode (157 s with the embedded-LLM teacher, 165 s with the oracle's), batched grid
-# evaluation at 30x30x3 (145 episodes/s, benchmarks/eval_throughput.py; other sizes scale
-# with the area). Estimated, not measured here: an IL run, a physics episode (PyFlyt), one
+# student mode (157 s with the embedded-LLM teacher, 165 s with the oracle's), grid
+# evaluation of trained policies at 3 episodes of 30x30x3 per second and worker, other sizes
+# scaling with the area (the demo's 352 grid episodes on 30/45/60 and the campus took 2.1 min
+# in 2 workers, loading every run and the batched policy steps included; the 145 episodes/s
+# of benchmarks/eval_throughput.py is the batched core alone, which made the plan say
+# "0 min"). Estimated, not measured here: an IL run, a physics episode (PyFlyt), one
 # embedded-LLM answer for LLM-only, one batch of answers in sync PARE (docs/deviations.md).
 # An advised run's cost against PPO, a sync batch's seconds and a teacher phase's answers per
 # second are per advisor: its entry in pirl.advice.registry holds them.
 RATES: dict[str, Any] = {
     "ppo_steps_per_s": 5000.0,
     "il_s": 60.0,
-    "eval_eps_per_s": {30: 145.0},
+    "eval_eps_per_s": {30: 3.0},
     "physics_s_per_episode": 30.0,
     "llm_only_s_per_call": 1.0,
 }
