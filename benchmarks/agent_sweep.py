@@ -3,9 +3,11 @@
 Trains PPO-EWRI and PIRL with oracle advice (the profile's ``reproduce.pirl_variants``) for
 every variant below and every training seed, with ``pirl reproduce``'s training (worker
 processes, one folder per variant), then plays every run on larger worlds than it trained on,
-acting stochastic and greedy, next to the boustrophedon planner on the same scenarios. Rows:
+acting stochastic and greedy, next to the boustrophedon planner on the same scenarios, and
+optionally on cluttered worlds (``--clutter``: 8-20 spheres) and sites (``--sites``). Rows:
 VCR IQM over training seeds [stratified bootstrap 95% interval], the worst seed, steps, steps
-relative to the planner, camera share. ``--split validation`` (the default) plays validation
+relative to the planner, camera share, and the episodes that ended in a loop (their last 60
+steps visit fewer than 10 cells). ``--split validation`` (the default) plays validation
 scenarios, which no evaluation uses: settings are chosen there. ``--split evaluation`` plays the
 evaluation scenarios of ``pirl reproduce`` (the ablation reported in docs/results.md).
 
@@ -28,7 +30,7 @@ import yaml
 from pirl.agents.loading import load_policy
 from pirl.config.run import RunConfig
 from pirl.evaluate.reproduce import steps_text, train_all
-from pirl.evaluate.rollout import run_batch, run_episode
+from pirl.evaluate.rollout import LOOP_CELLS, run_batch, run_episode
 from pirl.evaluate.scenarios import parse_size, scenario_seeds, size_name, validation_seeds
 from pirl.evaluate.summary import interval_estimates
 
@@ -37,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # name -> overrides of the profile (sections env, ppo, train); every variant trains the same runs.
 PAPER_OBS = {"obs_visits": False, "obs_target": False}
 MEMORY = {"obs_visits": True, "obs_target": True}
+PATH = {**MEMORY, "obs_target_path": True}
 FIXED = {"camera_start": "fixed"}  # training starts at the paper's camera pose
 
 
@@ -92,7 +95,30 @@ VARIANTS: dict[str, dict[str, dict]] = {
     ),
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
     "masked-memory-train30": overrides(env={**MEMORY, "size": [30, 30, 3]}),
+    # Greedy loops on clutter and sites (docs/results.md): training worlds twice as dense as
+    # the evaluation's (4-10 spheres on 15x15x3), or visit counts that saturate at 8, not 3.
+    "masked-memory-path-dense": overrides(env=PATH, train={"obstacles": [4, 10]}),
+    "masked-memory-path-visits8": overrides(env={**PATH, "obs_visits_cap": 8}),
+    # ... or half the training episodes start with the work left in one box out of sight.
+    "masked-memory-path-surveyed": overrides(env=PATH, train={"surveyed_start": 0.5}),
 }
+
+# Cluttered generated worlds: 8-20 spheres where the evaluation's have 2-5 (a held-out family).
+CLUTTER = {"obstacles_min": 8, "obstacles_max": 20}
+
+
+def worlds_of(base_env, sizes, clutter: list[str], sites: list[str]):
+    """(name, env config with size or site, grid size) of every world family to play."""
+    from pirl.world.seeable import with_site
+
+    out = [(size_name(s), base_env.replace(size=s), s) for s in sizes]
+    for text in clutter:
+        s = parse_size(text)
+        out.append((f"clutter-{size_name(s)}", base_env.replace(size=s, **CLUTTER), s))
+    for site in sites:
+        env = with_site(base_env, site)
+        out.append((f"site:{Path(site).name}", env, env.size))
+    return out
 
 
 def planner_steps(env_cfg, seeds: list[int]) -> tuple[list[float], list[float]]:
@@ -118,6 +144,13 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None,
                         help="PPO steps of every method (default: the profile's)")  # fmt: skip
     parser.add_argument("--sizes", nargs="+", default=["30", "45", "60"])
+    parser.add_argument(
+        "--clutter",
+        nargs="*",
+        default=[],
+        help="sizes also played with 8-20 spheres (cluttered worlds)",
+    )
+    parser.add_argument("--sites", nargs="*", default=[], help="site folders also played")
     parser.add_argument("--episodes", type=int, default=6, help="scenarios per size")
     parser.add_argument("--split", default="validation", choices=("validation", "evaluation"))
     parser.add_argument("--workers", type=int, default=None, help="training processes")
@@ -131,12 +164,15 @@ def main() -> None:
     base = base.with_overrides(reproduce={"seeds": args.seeds})
     if args.methods:
         base = base.with_overrides(reproduce={"methods": args.methods})
+    # PIRL with oracle advice only (a profile such as quick also trains PIRL with its LLM).
+    oracle = [v for v in base.reproduce.pirl_variants if v.get("advisor") == "oracle"]
+    if oracle:
+        base = base.with_overrides(reproduce={"pirl_variants": oracle})
     pick = validation_seeds if args.split == "validation" else scenario_seeds
     sizes = [parse_size(s) for s in args.sizes]
     planner = {}
-    for size in sizes:
-        env = base.env.replace(size=size)
-        planner[size] = planner_steps(env, pick(size, args.episodes))
+    for name, env, grid_size in worlds_of(base.env, sizes, args.clutter, args.sites):
+        planner[name] = planner_steps(env, pick(grid_size, args.episodes))
     rows = []
     budgets = {}
     for variant in args.variants:
@@ -151,16 +187,18 @@ def main() -> None:
             trained_env = RunConfig.from_dict(
                 yaml.safe_load((members[0] / "config.yaml").read_text())
             ).env
-            for size in sizes:
-                seeds = pick(size, args.episodes)
-                p_steps, p_vcr = planner[size]
-                # Every evaluation starts at the paper's camera pose (a run that trained with
-                # exploring starts recorded start_camera: random before they left its env).
-                env = trained_env.replace(size=size, start_camera="fixed")
+            # Every evaluation starts at the paper's camera pose (a run that trained with
+            # exploring starts recorded start_camera: random before they left its env).
+            trained_env = trained_env.replace(start_camera="fixed")
+            for world, env, grid_size in worlds_of(trained_env, sizes, args.clutter, args.sites):
+                seeds = pick(grid_size, args.episodes)
+                p_steps, p_vcr = planner[world]
                 for act in ("stochastic", "greedy"):
                     per_seed_vcr, per_seed_steps, ratios, cams = [], [], [], []
+                    loops = 0
                     for run in members:
                         metrics = run_batch(env, load_policy(run, act=act), seeds)
+                        loops += sum(m["tail_cells"] < LOOP_CELLS for m in metrics)
                         per_seed_vcr.append(np.mean([m["vcr"] for m in metrics]))
                         per_seed_steps.append(np.mean([m["steps"] for m in metrics]))
                         ratios.append(
@@ -170,7 +208,7 @@ def main() -> None:
                     est = interval_estimates(np.array(per_seed_vcr)[:, None])
                     rows.append({
                         "variant": variant, "method": group, "label": label,
-                        "size": size_name(size), "act": act, "seeds": len(members),
+                        "size": world, "act": act, "seeds": len(members),
                         "vcr_iqm": est["iqm"],
                         "vcr_iqm_lo": est["iqm_lo"], "vcr_iqm_hi": est["iqm_hi"],
                         "vcr_min_seed": float(min(per_seed_vcr)),
@@ -183,13 +221,15 @@ def main() -> None:
                             100 * np.mean(per_seed_vcr) / max(1.0, np.mean(per_seed_steps))
                         ),
                         "camera_share": float(np.mean(cams)),
+                        "loop_episodes": int(loops),
+                        "episodes": len(seeds) * len(members),
                     })  # fmt: skip
                     r = rows[-1]
                     print(
                         f"{variant:>14} {group:>22} {r['size']:>8} {act:>10}  VCR IQM "
                         f"{r['vcr_iqm']:.3f} [{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] "
                         f"min {r['vcr_min_seed']:.3f}  steps x{r['steps_vs_planner']:.2f} "
-                        f"planner  cam {r['camera_share']:.2f}",
+                        f"planner  cam {r['camera_share']:.2f}  loops {loops}/{r['episodes']}",
                         flush=True,
                     )
     args.out.mkdir(parents=True, exist_ok=True)
@@ -203,15 +243,15 @@ def main() -> None:
         + "; ".join(f"{v} {b}" for v, b in budgets.items())
         + "\n",
         "| variant | method | size | act | VCR IQM [95% interval] | per seed | steps "
-        "| x planner's steps | VCR / 100 steps | camera share |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| x planner's steps | VCR / 100 steps | camera share | loop episodes |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['variant']} | {r['label']} | {r['size']} | {r['act']} | {r['vcr_iqm']:.3f} "
             f"[{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] | {r['vcr_per_seed']} | "
             f"{r['steps']:.0f} | {r['steps_vs_planner']:.2f} | {r['vcr_per_100_steps']:.3f} | "
-            f"{r['camera_share']:.2f} |"
+            f"{r['camera_share']:.2f} | {r['loop_episodes']}/{r['episodes']} |"
         )
     text = "\n".join(lines) + "\n"
     (args.out / "sweep.md").write_text(text)

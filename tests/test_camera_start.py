@@ -57,3 +57,35 @@ def test_unknown_camera_start_is_one_line() -> None:
         RunConfig.from_dict({"train": {"camera_start": "sometimes"}})
     with pytest.raises(ConfigError, match="start_camera"):
         VCPPConfig(start_camera="sometimes")
+
+
+def test_training_obstacles_reach_the_training_env_only() -> None:
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"obstacles": [4, 10]})
+    trained = training_env(resolved_config("ppo-ewri", cfg))
+    assert (trained.obstacles_min, trained.obstacles_max) == (4, 10)
+    env = resolved_config("ppo-ewri", cfg).env
+    assert (env.obstacles_min, env.obstacles_max) == (2, 5)  # what evaluations build
+    with pytest.raises(ConfigError, match="train.obstacles"):
+        RunConfig.from_dict({"train": {"obstacles": [5, 2]}})
+
+
+def test_surveyed_starts_leave_one_box_of_work() -> None:
+    cfg = VCPPConfig(size=(15, 15, 3), start_surveyed=1.0)
+    plain = draw_scenario(VCPPConfig(size=(15, 15, 3)), np.random.default_rng(3))
+    drawn = draw_scenario(cfg, np.random.default_rng(3))
+    assert plain.work is None and drawn.start == plain.start  # drawn last: the rest unchanged
+    x0, y0, x1, y1 = drawn.work
+    assert 2 <= x1 - x0 + 1 <= 7 and 2 <= y1 - y0 + 1 <= 7
+    from pirl.env.core import EnvCore
+
+    core = EnvCore(cfg, 1)
+    core.reset_world(0, np.random.default_rng(3), scenario=drawn)
+    w = core.world
+    todo = w.coverable[0] & (w.views[0] == 0)
+    box = np.zeros_like(todo)
+    box[x0 : x1 + 1, y0 : y1 + 1] = True
+    assert not (todo & ~box).any()  # only the box is left (less what the first view saw)
+    assert w.status[0]["covered"] == int((w.views[0] > 0).sum())
+    assert w.blk_todo[0].sum() == int(todo.sum())
+    with pytest.raises(ConfigError, match="train.surveyed_start"):
+        RunConfig.from_dict({"train": {"surveyed_start": 2}})

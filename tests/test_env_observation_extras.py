@@ -116,3 +116,19 @@ def test_path_target_needs_the_target_block():
 
     with pytest.raises(ConfigError, match="obs_target_path.*needs obs_target"):
         VCPPConfig(obs_target_path=True)
+
+
+def test_visit_window_saturates_at_its_cap():
+    env = gym.make("pirl/VCPP-v0", obs_visits=True, obs_visits_cap=8, **SMALL).unwrapped
+    env.reset(seed=2)
+    mask = env.action_masks()
+    move = next(a for a in (D.X_PLUS, D.X_MINUS, D.Y_PLUS, D.Y_MINUS) if mask[a])
+    back = move + 1 if move % 2 == 0 else move - 1
+    for a in (move, back) * 6:
+        obs, *_ = env.step(a)
+    window = obs[BASE : BASE + W * W].reshape(W, W)
+    centre = W // 2
+    dx, dy, _ = D.MOVE_DELTAS[move]
+    # Seven visits (the start and six returns) and six: under a cap of 3 both would read 1.
+    assert np.isclose(window[centre, centre], 7 / 8)
+    assert np.isclose(window[centre + dx, centre + dy], 6 / 8)

@@ -146,6 +146,8 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
         for name in ("obs_visits", "obs_target", "obs_target_path")
         if getattr(env_cfg, name, False)
     ]  # fmt: skip
+    if env_cfg.obs_visits and env_cfg.obs_visits_cap != 3:
+        parts.append(f"obs_visits_cap={env_cfg.obs_visits_cap}")
     # A site's prompts list its buildings (a map prompt): answers about one site stay its own.
     if getattr(env_cfg, "site", ""):
         parts.append(f"site={env_cfg.site}")

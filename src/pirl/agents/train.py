@@ -73,9 +73,16 @@ def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
 
 
 def training_env(cfg: RunConfig) -> VCPPConfig:
-    """The resolved env with ``train.camera_start`` applied: exploring starts are a way of
-    training, so they stay out of the env that config.yaml records and evaluations build."""
-    return cfg.env.replace(start_camera=cfg.train.camera_start)
+    """The resolved env with ``train.camera_start``, ``surveyed_start`` and ``obstacles``
+    applied: exploring starts, work out of sight and denser worlds are ways of training, so
+    they stay out of the env that config.yaml records and evaluations build."""
+    env = cfg.env.replace(
+        start_camera=cfg.train.camera_start, start_surveyed=cfg.train.surveyed_start
+    )
+    if cfg.train.obstacles:
+        low, high = cfg.train.obstacles
+        env = env.replace(obstacles_min=int(low), obstacles_max=int(high))
+    return env
 
 
 # -- 1. settling the run: resolved_config, check_resume --------------------------------------

@@ -86,6 +86,14 @@ class TrainSettings(Settings, section="train"):
     at a pose drawn uniformly on the camera grid ('random': exploring starts, so a policy meets
     wide footprints it would not find by chance) or, half the time each, both ('mixed').
     Evaluation always starts at the env's pose."""
+    surveyed_start: float = 0.0
+    """Share of training episodes that start with all ground covered but one random box
+    (``env.start_surveyed``; evaluation never does): the work left lies out of sight, as on
+    large worlds and sites, where a policy must follow the target to find it."""
+    obstacles: tuple[int, ...] = ()
+    """Training worlds' fewest and most obstacle spheres, ``[min, max]``, in place of the env's
+    (evaluation keeps the env's): denser worlds than the evaluation's, so that a policy meets
+    the clutter of larger worlds and sites while it learns. Empty: the env's."""
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
@@ -95,6 +103,12 @@ class TrainSettings(Settings, section="train"):
         """A positive length and checkpoint interval, a known camera start."""
         self.require_positive("total_steps", "checkpoint_every")
         self.require_choice("camera_start", ("fixed", "random", "mixed"))
+        if not 0.0 <= self.surveyed_start <= 1.0:
+            raise self.refuse("surveyed_start", "must be a share in [0, 1]")
+        if self.obstacles and (
+            len(self.obstacles) != 2 or not 0 <= self.obstacles[0] <= self.obstacles[1]
+        ):
+            raise self.refuse("obstacles", "write [min, max] with 0 <= min <= max, or leave it out")
         for name, steps in self.steps_by_method.items():
             if steps <= 0:
                 raise self.refuse("steps_by_method", f"{name}: must be > 0")

@@ -124,6 +124,11 @@ class VCPPConfig(Settings, section="env"):
     """'fixed': every episode starts with the camera at start_tilt/pan/zoom (the paper). 'random':
     each scenario also draws its starting camera pose uniformly on the grid (exploring starts;
     training only: ``train.camera_start``); 'mixed': half of the scenarios do."""
+    start_surveyed: float = 0.0
+    """Share of episodes that start with the ground already covered but for one box (each
+    side 2 cells to half the world's), drawn anywhere (training only: ``train.surveyed_start``):
+    the work left then often lies out of the UAV's local window, as on a large world or a site,
+    so a policy learns to find it by the target and the global summary. 0: none (the paper)."""
     reward: str = "static"
     """Reward weights: 'static' (PPO-SR) or 'ewri' (re-drawn at every reset)."""
     static_weights: tuple[float, ...] = STATIC_WEIGHTS
@@ -141,6 +146,10 @@ class VCPPConfig(Settings, section="env"):
     the curiosity term rewards unvisited cells, and without it a policy cannot see which ones
     it has visited, so a greedy policy can loop (uavSim keeps a position history for this).
     False is the paper's observation."""
+    obs_visits_cap: int = 3
+    """With obs_visits: the count at which a cell's visits saturate (the window holds
+    min(v, cap)/cap). Below a cap a looping greedy policy sees its loop change; above it its
+    observation repeats exactly and so does its choice."""
     obs_target: bool = False
     """Add the direction to the nearest coverable cell not yet covered and its distance in
     cells (saturating at 16), so a policy trained on a small world can find the work left on a
@@ -226,6 +235,10 @@ class VCPPConfig(Settings, section="env"):
             raise self.refuse("start_pan", "allowed values are -90, -75, ..., 90")
         zoom_to_tenths(self.start_zoom, self.where("start_zoom"))
         self.require_choice("start_camera", ("fixed", "random", "mixed"))
+        if not 0.0 <= self.start_surveyed <= 1.0:
+            raise self.refuse("start_surveyed", "must be a share in [0, 1]")
+        if self.obs_visits_cap < 1:
+            raise self.refuse("obs_visits_cap", "must be >= 1")
         if self.obs_target_path and not self.obs_target:
             raise self.refuse("obs_target_path", "needs obs_target: true (it changes that block)")
         if len(self.static_weights) != len(REWARD_TERMS):

@@ -15,7 +15,7 @@ next 11               scalars      x/(X-1), y/(Y-1), z/(Z-1), tilt/90, (pan+90)/
                                    (zoom-0.5)/1.5, battery, coverage (VCR so far),
                                    steps left / step limit, blocked above, blocked below
 next W*W (obs_visits) (W, W)       local window: visits of each cell at the UAV's altitude
-                                   this episode, min(v, 3) / 3
+                                   this episode, min(v, C) / C (C = obs_visits_cap, 3)
 next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered (ground
                                    plane): (dx/d + 1)/2, (dy/d + 1)/2, min(d, 16)/16; 0.5,
                                    0.5, 0 when none is left or the UAV is above one. With
@@ -55,6 +55,8 @@ class ObsLayout(NamedTuple):
     """Side W of the local windows (odd)."""
     extras: int
     """Bits ``EXTRA_VISITS | EXTRA_TARGET`` of the optional blocks present."""
+    visits_cap: int
+    """Visit count at which the visits window saturates."""
 
 
 def obs_size(window: int, global_side: int, visits: bool = False, target: bool = False) -> int:
@@ -75,7 +77,7 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
         | (EXTRA_TARGET if cfg.obs_target else 0)
         | (EXTRA_PATH if cfg.obs_target_path else 0)
     )
-    return ObsLayout(int(cfg.obs_window), extras)
+    return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap))
 
 
 @numba.njit(cache=True, inline="always")
@@ -191,10 +193,11 @@ def observation(w, p, layout, e, out):
     o[k + 10] = 1.0 if (z - 1 < 0 or blocked[e, x, y, z - 1]) else 0.0
     k += N_SCALARS
     if extras & EXTRA_VISITS:
+        cap = layout.visits_cap
         for i in range(x - half, x + half + 1):
             for j in range(y - half, y + half + 1):
                 v = w.visits[e, i, j, z] if (0 <= i < sx and 0 <= j < sy) else 0
-                o[k] = min(v, 3) / 3.0
+                o[k] = min(v, cap) / cap
                 k += 1
     if extras & EXTRA_TARGET:
         moves = -1

@@ -16,6 +16,36 @@ from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
 from pirl.world.metrics import episode_metrics
+from pirl.world.state import WorldBatch
+
+LOOP_WINDOW = 60
+"""Steps at the end of an episode whose cells ``tail_cells`` counts."""
+LOOP_CELLS = 10
+"""An episode whose last :data:`LOOP_WINDOW` steps visit fewer cells than this ended in a loop."""
+
+
+class PathTail:
+    """The cells each world of a batch visited in its last :data:`LOOP_WINDOW` steps.
+
+    A policy caught between two cells (a wall it cannot pass, a target it cannot reach) flies
+    on until its battery ends; its episode's VCR looks merely low. Its tail shows the loop:
+    ``tail_cells`` of an episode is the number of distinct cells of its last 60 steps.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.cells = np.full((n, LOOP_WINDOW), -1, dtype=np.int64)
+
+    def record(self, world: WorldBatch, live: np.ndarray) -> None:
+        """Note the cell where each world of ``live`` is after its step."""
+        st = world.status[live]
+        _, ny, nz = world.cfg.size
+        code = (st["x"] * ny + st["y"]) * nz + st["z"]
+        self.cells[live, st["steps"] % LOOP_WINDOW] = code
+
+    def distinct(self, e: int) -> int:
+        """Distinct cells of world ``e``'s last :data:`LOOP_WINDOW` steps."""
+        row = self.cells[e]
+        return int(np.unique(row[row >= 0]).size)
 
 
 @dataclass
@@ -34,15 +64,18 @@ def run_episode(
     obs, info = env.reset(seed=seed)
     policy.reset(env.world, 0, seed=seed)
     frames = [env.render()] if record else []
+    tail = PathTail(1)
+    only = np.zeros(1, dtype=np.int64)
     done = False
     step = 0
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        tail.record(env.world, only)
         done = terminated or truncated
         step += 1
         if record and (done or step % frame_every == 0):
             frames.append(env.render())
-    return EpisodeResult(seed, info["episode_metrics"], frames)
+    return EpisodeResult(seed, {**info["episode_metrics"], "tail_cells": tail.distinct(0)}, frames)
 
 
 def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[dict[str, float]]:
@@ -65,14 +98,17 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
     metrics: list[dict[str, float] | None] = [None] * n
     active = np.ones(n, dtype=bool)
     actions = np.zeros(n, dtype=np.int64)
+    tail = PathTail(n)
     while active.any():
         live = np.flatnonzero(active)
         actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live], core.masks[live])
-        if core.step(actions):
+        ended_any = core.step(actions)
+        tail.record(core.world, live)
+        if ended_any:
             flags = core.world.flags
             ended = live[(flags["terminated"][live] | flags["truncated"][live]) != 0]
             for e in ended:
-                metrics[e] = episode_metrics(core.world, int(e))
+                metrics[e] = {**episode_metrics(core.world, int(e)), "tail_cells": tail.distinct(e)}
             active[ended] = False
     return [m for m in metrics if m is not None]
 

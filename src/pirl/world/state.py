@@ -182,6 +182,9 @@ class Scenario:
     """Starting (tilt, pan, zoom tenths) if drawn (``start_camera``); else the config's."""
     grids: MapGrids | None = None
     """The site's map when the world is a site (then ``obstacles`` is empty)."""
+    work: tuple[int, int, int, int] | None = None
+    """Cells (x0, y0, x1, y1), inclusive, of the only ground left to cover at the start if
+    drawn (``start_surveyed``); every other ground cell starts covered. None: all of it."""
 
 
 @numba.njit(cache=True)
@@ -218,7 +221,10 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
         start = grids.starts[int(rng.integers(len(grids.starts)))]
         wind_seed = int(rng.integers(0, 2**63 - 1))
         start_cell = (int(start[0]), int(start[1]), int(start[2]))
-        return Scenario(np.zeros((0, 4)), start_cell, wind_seed, _draw_camera(cfg, rng), grids)
+        camera = _draw_camera(cfg, rng)
+        return Scenario(
+            np.zeros((0, 4)), start_cell, wind_seed, camera, grids, _draw_work(cfg, rng)
+        )
     sx, sy, sz = cfg.size
     lo, hi = cfg.obstacle_count_range
     span = np.array([sx - 1, sy - 1, sz - 1], dtype=np.float64)
@@ -234,12 +240,26 @@ def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
             wind_seed = int(rng.integers(0, 2**63 - 1))
             camera = _draw_camera(cfg, rng)
             start_cell = (int(start[0]), int(start[1]), int(start[2]))
-            return Scenario(obstacles, start_cell, wind_seed, camera)
+            return Scenario(obstacles, start_cell, wind_seed, camera, None, _draw_work(cfg, rng))
     raise ConfigError(
         f"size={cfg.size}: could not place {lo}-{hi} obstacles of radius "
         f"{cfg.radius_min}-{cfg.radius_max} and keep a free cell and coverable ground; "
         "use a larger world or smaller/fewer obstacles"
     )
+
+
+def _draw_work(cfg: VCPPConfig, rng: np.random.Generator) -> tuple[int, int, int, int] | None:
+    """With probability ``start_surveyed``, a box of ground left to cover (each side 2 cells to
+    half the world's); drawn after everything else and only when asked, so other scenarios
+    stay the same."""
+    if cfg.start_surveyed <= 0 or rng.random() >= cfg.start_surveyed:
+        return None
+    sx, sy, _ = cfg.size
+    wx = int(rng.integers(2, max(2, sx // 2) + 1))
+    wy = int(rng.integers(2, max(2, sy // 2) + 1))
+    x0 = int(rng.integers(0, sx - wx + 1))
+    y0 = int(rng.integers(0, sy - wy + 1))
+    return (x0, y0, x0 + wx - 1, y0 + wy - 1)
 
 
 def _draw_camera(cfg: VCPPConfig, rng: np.random.Generator) -> tuple[int, int, int] | None:
@@ -254,22 +274,30 @@ def _draw_camera(cfg: VCPPConfig, rng: np.random.Generator) -> tuple[int, int, i
 
 
 @numba.njit(cache=True)
-def _reset_bookkeeping(w, p, e):
-    """Zero world e's bookkeeping, count its coverable cells and take the first view."""
+def _reset_bookkeeping(w, p, e, work):
+    """Zero world e's bookkeeping, count its coverable cells and take the first view. With
+    ``work`` = (x0, y0, x1, y1) (x0 >= 0) the ground outside that box starts covered."""
     w.views[e] = 0
     w.redmask[e] = False
     w.visits[e] = 0
     w.blk_todo[e] = 0
     w.blk_total[e] = 0
     n = 0
+    covered = 0
+    x0, y0, x1, y1 = work
     for i in range(w.coverable.shape[1]):
         for j in range(w.coverable.shape[2]):
             if w.coverable[e, i, j]:
                 n += 1
-                w.blk_todo[e, w.block_x[i], w.block_y[j]] += 1
                 w.blk_total[e, w.block_x[i], w.block_y[j]] += 1
+                if x0 >= 0 and not (x0 <= i <= x1 and y0 <= j <= y1):
+                    w.views[e, i, j] = 1
+                    covered += 1
+                else:
+                    w.blk_todo[e, w.block_x[i], w.block_y[j]] += 1
     st = w.status[e]
     st["coverable"] = n
+    st["covered"] = covered
     w.visits[e, st["x"], st["y"], st["z"]] = 1
     # The camera sees before the first action; that first view earns no reward.
     D.observe(w, p, e, False)
@@ -399,7 +427,8 @@ class WorldBatch:
         st["n_obstacles"] = n
         w.energy[e] = self.capacity
         w.rng[e] = np.uint64(scenario.wind_seed)
-        _reset_bookkeeping(w, self.params, e)
+        work = scenario.work if scenario.work is not None else (-1, -1, -1, -1)
+        _reset_bookkeeping(w, self.params, e, tuple(int(v) for v in work))
         w.terms[e] = 0.0
         w.flags[e] = 0
 

@@ -1,0 +1,44 @@
+"""Loops: an episode's tail (the cells of its last 60 steps), counted by both runners."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pirl.agents.loading import LearnedPolicy, load_policy
+from pirl.config.world import VCPPConfig
+from pirl.env.observation import N_SCALARS
+from pirl.env.vcpp_env import VCPPEnv
+from pirl.evaluate.rollout import LOOP_CELLS, LOOP_WINDOW, run_batch, run_episode
+from pirl.world import dynamics as D
+
+OPEN = VCPPConfig(size=(20, 20, 3), obstacles_min=0, obstacles_max=0, wind_prob=0.0, max_steps=150)
+X_SCALAR = 2 * OPEN.obs_window**2 + OPEN.obs_global**2  # x / (X - 1), first of the scalars
+
+
+class Pendulum(LearnedPolicy):
+    """x+ from an even column, x- from an odd one: two cells, back and forth, for ever."""
+
+    label = "pendulum"
+
+    def probabilities(self, obs: np.ndarray) -> np.ndarray:
+        x = np.rint(obs[:, X_SCALAR] * (OPEN.size[0] - 1)).astype(int)
+        probs = np.zeros((len(obs), D.N_ACTIONS))
+        probs[np.arange(len(obs)), np.where(x % 2 == 0, D.X_PLUS, D.X_MINUS)] = 1.0
+        return probs
+
+
+def test_a_two_cell_loop_has_a_tail_of_two_cells_in_both_runners():
+    assert N_SCALARS == 11 and LOOP_WINDOW == 60
+    seeds = [3, 4, 5]
+    batched = run_batch(OPEN, Pendulum(), seeds)
+    single = [run_episode(VCPPEnv(OPEN), Pendulum(), s).metrics for s in seeds]
+    assert batched == single
+    assert [m["tail_cells"] for m in batched] == [2, 2, 2]
+    assert all(m["steps"] > LOOP_WINDOW for m in batched)
+
+
+def test_the_planner_never_loops():
+    env = VCPPEnv(OPEN.replace(obstacles_min=2, obstacles_max=5))
+    for seed in (1, 2):
+        m = run_episode(env, load_policy("boustrophedon"), seed).metrics
+        assert m["vcr"] == 1.0 and m["tail_cells"] >= LOOP_CELLS
