@@ -88,7 +88,9 @@ VARIANTS: dict[str, dict[str, dict]] = {
     ),
     # The target block by the way round obstacles (breadth-first), not the straight line, which
     # trapped greedy policies in front of walls on 60x60x3 (docs/results.md).
-    "masked-memory-path": overrides(env={**MEMORY, "obs_target_path": True}),
+    "masked-memory-path": overrides(
+        env={**MEMORY, "obs_target_path": True}, train={"obstacles": []}
+    ),
     # ... with PPO-EWRI at 409,600 steps (the other methods at the profile's budget).
     "masked-memory-path-ewri409": overrides(
         env={**MEMORY, "obs_target_path": True}, train={"steps_by_method": {"ppo-ewri": 409600}}
@@ -101,6 +103,11 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory-path-visits8": overrides(env={**PATH, "obs_visits_cap": 8}),
     # ... or half the training episodes start with the work left in one box out of sight.
     "masked-memory-path-surveyed": overrides(env=PATH, train={"surveyed_start": 0.5}),
+    # Trained on a site's seeded starts, not on generated worlds (what training on sites changes).
+    "masked-memory-path-village": overrides(env={**PATH, "site": "examples/sites/village"}),
+    "masked-memory-path-dense-surveyed": overrides(
+        env=PATH, train={"obstacles": [4, 10], "surveyed_start": 0.5}
+    ),
 }
 
 # Cluttered generated worlds: 8-20 spheres where the evaluation's have 2-5 (a held-out family).
@@ -111,6 +118,7 @@ def worlds_of(base_env, sizes, clutter: list[str], sites: list[str]):
     """(name, env config with size or site, grid size) of every world family to play."""
     from pirl.world.seeable import with_site
 
+    base_env = base_env.replace(site="", ground_cells=0)  # a run may have trained on a site
     out = [(size_name(s), base_env.replace(size=s), s) for s in sizes]
     for text in clutter:
         s = parse_size(text)
@@ -143,7 +151,7 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", default=None, help="default: the profile's")
     parser.add_argument("--steps", type=int, default=None,
                         help="PPO steps of every method (default: the profile's)")  # fmt: skip
-    parser.add_argument("--sizes", nargs="+", default=["30", "45", "60"])
+    parser.add_argument("--sizes", nargs="*", default=["30", "45", "60"])
     parser.add_argument(
         "--clutter",
         nargs="*",
@@ -177,6 +185,17 @@ def main() -> None:
     budgets = {}
     for variant in args.variants:
         cfg = base.with_overrides(**VARIANTS[variant])
+        if cfg.env.site:  # as `pirl train --site` settles it: the site's grid and ground
+            from pirl.world.seeable import with_site
+
+            on_site = with_site(cfg.env, str(ROOT / cfg.env.site))
+            cfg = cfg.with_overrides(
+                env={
+                    "site": on_site.site,
+                    "size": list(on_site.size),
+                    "ground_cells": on_site.ground_cells,
+                }
+            )
         budgets[variant] = steps_text(cfg)
         runs = train_all(cfg, args.out / variant, "oracle", print, False, workers=args.workers)
         groups: dict[str, list[Path]] = {}

@@ -336,7 +336,9 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
     runs = plan_runs(cfg, advisor)
     rp = cfg.reproduce
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
-    check_layouts(cfg.env, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
+    # The sizes are generated worlds even when the runs train on a site.
+    generated = cfg.env.replace(site="", ground_cells=0)
+    check_layouts(generated, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
     return CheckedProfile(cfg, advisor, workers, tuple(runs), tuple(profile_sites(cfg)))
 
 
