@@ -8,8 +8,9 @@ from pirl.agents.loading import LearnedPolicy, load_policy
 from pirl.config.world import VCPPConfig
 from pirl.env.observation import N_SCALARS
 from pirl.env.vcpp_env import VCPPEnv
-from pirl.evaluate.rollout import LOOP_CELLS, LOOP_WINDOW, run_batch, run_episode
+from pirl.evaluate.rollout import run_batch, run_episode
 from pirl.world import dynamics as D
+from pirl.world.metrics import LOOP_CELLS, LOOP_WINDOW
 
 OPEN = VCPPConfig(size=(20, 20, 3), obstacles_min=0, obstacles_max=0, wind_prob=0.0, max_steps=150)
 X_SCALAR = 2 * OPEN.obs_window**2 + OPEN.obs_global**2  # x / (X - 1), first of the scalars
@@ -42,3 +43,12 @@ def test_the_planner_never_loops():
     for seed in (1, 2):
         m = run_episode(env, load_policy("boustrophedon"), seed).metrics
         assert m["vcr"] == 1.0 and m["tail_cells"] >= LOOP_CELLS
+
+
+def test_a_loop_flown_in_physics_has_the_same_tail():
+    from pirl.config.physics import PhysicsConfig
+    from pirl.physics import run_physics_episode
+
+    cfg = OPEN.replace(max_steps=LOOP_WINDOW + 4, scale_by_alpha=False)
+    m = run_physics_episode(cfg, Pendulum(), seed=3, physics=PhysicsConfig())
+    assert m["steps"] == LOOP_WINDOW + 4 and m["tail_cells"] == 2

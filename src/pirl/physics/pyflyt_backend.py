@@ -31,6 +31,7 @@ from pirl.agents.policy import Policy
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 from pirl.physics.mission import Mission, Pose, normalized_power
+from pirl.world.metrics import PathTail
 
 # PyBullet calls made every physics step. BulletClient resolves them through __getattr__ with
 # inspect and functools on every call, 10-20% of a step's time; binding them once
@@ -243,14 +244,17 @@ def run_physics_episode(
     mission = Mission(env_cfg, physics or PhysicsConfig())
     obs, info = mission.reset(seed)
     policy.reset(mission.world, 0, seed=seed)
+    tail = PathTail(1)
+    only = np.zeros(1, dtype=np.int64)
     with PyFlytFlight(mission) as flight:
         done = False
         while not done:
             mission.begin_step(int(policy.act(obs, info)))
             pose = flight.fly(mission)
             obs, terminated, truncated, info = mission.end_step(pose)
+            tail.record(mission.world, only)
             done = terminated or truncated
-    return mission.metrics()
+    return {**mission.metrics(), "tail_cells": tail.distinct(0)}
 
 
 __all__ = ["PyFlytFlight", "run_physics_episode"]

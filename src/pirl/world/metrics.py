@@ -11,7 +11,38 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from pirl.world.state import WorldBatch
+
+LOOP_WINDOW = 60
+"""Steps at the end of an episode whose cells ``tail_cells`` counts."""
+LOOP_CELLS = 10
+"""An episode whose last :data:`LOOP_WINDOW` steps visit fewer cells than this ended in a loop."""
+
+
+class PathTail:
+    """The cells each world of a batch visited in its last :data:`LOOP_WINDOW` steps.
+
+    A policy caught between two cells (a wall it cannot pass, a target it cannot reach) flies
+    on until its battery ends; its episode's VCR looks merely low. Its tail shows the loop:
+    ``tail_cells`` of an episode is the number of distinct cells of its last 60 steps.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.cells = np.full((n, LOOP_WINDOW), -1, dtype=np.int64)
+
+    def record(self, world: WorldBatch, live: np.ndarray) -> None:
+        """Note the cell where each world of ``live`` is after its step."""
+        st = world.status[live]
+        _, ny, nz = world.cfg.size
+        code = (st["x"] * ny + st["y"]) * nz + st["z"]
+        self.cells[live, st["steps"] % LOOP_WINDOW] = code
+
+    def distinct(self, e: int) -> int:
+        """Distinct cells of world ``e``'s last :data:`LOOP_WINDOW` steps."""
+        row = self.cells[e]
+        return int(np.unique(row[row >= 0]).size)
 
 
 def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
