@@ -115,11 +115,14 @@ VARIANTS: dict[str, dict[str, dict]] = {
 CLUTTER = {"obstacles_min": 8, "obstacles_max": 20}
 
 
-def worlds_of(base_env, sizes, clutter: list[str], sites: list[str]):
-    """(name, env config with size or site, grid size) of every world family to play."""
+def worlds_of(base_env, sizes, clutter: list[str], sites: list[str], wind: bool = True):
+    """(name, env config with size or site, grid size) of every world family to play; without
+    ``wind`` the grid's random wind pushes are off (the PyFlyt flight has none either)."""
     from pirl.world.seeable import with_site
 
     base_env = base_env.replace(site="", ground_cells=0)  # a run may have trained on a site
+    if not wind:
+        base_env = base_env.replace(wind_prob=0.0)
     out = [(size_name(s), base_env.replace(size=s), s) for s in sizes]
     for text in clutter:
         s = parse_size(text)
@@ -161,6 +164,9 @@ def main() -> None:
     )
     parser.add_argument("--sites", nargs="*", default=[], help="site folders also played")
     parser.add_argument("--episodes", type=int, default=6, help="scenarios per size")
+    parser.add_argument("--no-wind", action="store_true",
+                        help="no random wind pushes in the grid (as in PyFlyt); results go to "
+                        "sweep-nowind.md/.csv")  # fmt: skip
     parser.add_argument("--split", default="validation", choices=("validation", "evaluation"))
     parser.add_argument("--workers", type=int, default=None, help="training processes")
     parser.add_argument("--out", type=Path, default=Path("results/agent-sweep"))
@@ -180,7 +186,8 @@ def main() -> None:
     pick = validation_seeds if args.split == "validation" else scenario_seeds
     sizes = [parse_size(s) for s in args.sizes]
     planner = {}
-    for name, env, grid_size in worlds_of(base.env, sizes, args.clutter, args.sites):
+    wind = not args.no_wind
+    for name, env, grid_size in worlds_of(base.env, sizes, args.clutter, args.sites, wind):
         planner[name] = planner_steps(env, pick(grid_size, args.episodes))
     rows = []
     budgets = {}
@@ -210,7 +217,8 @@ def main() -> None:
             # Every evaluation starts at the paper's camera pose (a run that trained with
             # exploring starts recorded start_camera: random before they left its env).
             trained_env = trained_env.replace(start_camera="fixed")
-            for world, env, grid_size in worlds_of(trained_env, sizes, args.clutter, args.sites):
+            worlds = worlds_of(trained_env, sizes, args.clutter, args.sites, wind)
+            for world, env, grid_size in worlds:
                 seeds = pick(grid_size, args.episodes)
                 p_steps, p_vcr = planner[world]
                 for act in ("stochastic", "greedy"):
@@ -253,12 +261,15 @@ def main() -> None:
                         flush=True,
                     )
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "sweep.csv", "w", newline="") as fh:
+    stem = "sweep-nowind" if args.no_wind else "sweep"
+    with open(args.out / f"{stem}.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
     lines = [
-        f"Agent sweep on {args.split} scenarios ({args.episodes} per size), profile "
+        f"Agent sweep on {args.split} scenarios ({args.episodes} per size"
+        + (", no wind pushes" if args.no_wind else "")
+        + "), profile "
         f"{Path(args.profile).name}, training seeds {args.seeds}; PPO steps: "
         + "; ".join(f"{v} {b}" for v, b in budgets.items())
         + "\n",
@@ -274,9 +285,9 @@ def main() -> None:
             f"{r['camera_share']:.2f} | {r['loop_episodes']}/{r['episodes']} |"
         )
     text = "\n".join(lines) + "\n"
-    (args.out / "sweep.md").write_text(text)
+    (args.out / f"{stem}.md").write_text(text)
     print(text)
-    print(f"results: {args.out / 'sweep.md'} and {args.out / 'sweep.csv'}")
+    print(f"results: {args.out / stem}.md and {args.out / stem}.csv")
 
 
 if __name__ == "__main__":
