@@ -357,3 +357,17 @@ def test_pyflyt_flies_a_site_among_its_buildings(tmp_path: Path) -> None:
     assert len(boxes) == 1 and boxes[0, 2] - boxes[0, 5] == 0.0  # it stands on the ground
     metrics = run_physics_episode(cfg, load_policy("boustrophedon", seed=0), 1)
     assert metrics["steps"] == 4 and metrics["collisions"] == 0 and metrics["vcr"] > 0
+
+
+def test_a_profile_that_trains_on_a_site_checks_its_sizes_as_generated_worlds() -> None:
+    from pirl.config.run import RunConfig
+    from pirl.evaluate.plan import check_reproduce
+
+    cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
+    site = with_site(cfg.env, str(EXAMPLES / "campus"))
+    cfg = cfg.with_overrides(
+        env={"site": site.site, "size": list(site.size), "ground_cells": site.ground_cells},
+        reproduce={"methods": ["ppo-ewri"]},
+    )
+    checked = check_reproduce(cfg, "oracle")
+    assert [run.method for run in checked.runs] == ["ppo-ewri"] * len(cfg.reproduce.seeds)
