@@ -215,19 +215,31 @@ def test_seeds_are_the_unit_on_a_hand_made_table():
 def test_camera_table_gives_steps_relative_to_the_planner():
     from pirl.evaluate.report import camera_table
 
-    def row(method: str, label: str, steps: float, vcr: float) -> dict:
+    def row(method: str, label: str, steps: float, vcr: float, **more) -> dict:
         return {
             "sim": "grid", "method": method, "label": label, "act": "greedy", "size": "30x30x3",
             "vcr_iqm": vcr, "vcr_iqm_lo": vcr, "vcr_iqm_hi": vcr, "vcr_mean": vcr,
-            "steps_mean": steps,
+            "steps_mean": steps, "n": 8, **more,
         }  # fmt: skip
 
     table = camera_table(
-        [row("boustrophedon", "planner", 200.0, 1.0), row("ppo-ewri", "PPO-EWRI", 300.0, 0.9)]
+        [
+            row("boustrophedon", "planner", 200.0, 1.0),  # a summary from before loops counted
+            row("ppo-ewri", "PPO-EWRI", 300.0, 0.9, loop_episodes=3.0),
+        ]
     )
     assert "steps / planner's" in table.header
     ewri = next(row for row in table.rows if row[0] == "PPO-EWRI")
-    assert ewri[-2] == "1.50" and ewri[-1] == "0.30"
+    assert ewri[-3] == "1.50" and ewri[-2] == "0.30" and ewri[-1] == "3 of 8"
+    planner = next(row for row in table.rows if row[0] == "planner")
+    assert planner[-1] == "—"
+
+
+def test_summary_counts_the_episodes_that_ended_in_a_loop():
+    from pirl.evaluate.summary import loop_episodes
+
+    group = [{"tail_cells": 2}, {"tail_cells": 9}, {"tail_cells": 10}, {"tail_cells": 55}, {}]
+    assert loop_episodes(group) == 2
 
 
 def test_report_settings_line_says_masked_or_not():

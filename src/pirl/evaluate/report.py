@@ -164,8 +164,9 @@ CAMERA = (
 def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
     """Camera use beside coverage: per method, size and act mode, the share of camera
     actions, mean footprint, final tilt and zoom, steps, steps relative to the planner's on
-    the same scenarios (mean steps over mean planner steps), and VCR per 100 steps; None
-    without rows of ``sim``."""
+    the same scenarios (mean steps over mean planner steps), VCR per 100 steps and the episodes
+    that ended in a loop (their last 60 steps in fewer than 10 cells); None without rows of
+    ``sim``."""
     from pirl.agents.boustrophedon import BoustrophedonPolicy
 
     sim_rows = [r for r in rows if r["sim"] == sim]
@@ -175,7 +176,7 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
         r["size"]: r.get("steps_mean") for r in sim_rows if r["method"] == BoustrophedonPolicy.name
     }
     head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
-    head += ["steps / planner's", "VCR per 100 steps"]
+    head += ["steps / planner's", "VCR per 100 steps", "episodes ending in a loop"]
     order = sorted(
         sim_rows,
         key=lambda r: (
@@ -190,6 +191,8 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
         ref = planner.get(r["size"])
         cells.append(f"{steps / ref:.2f}" if ref and steps and steps > 0 else "—")
         cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
+        loops = r.get("loop_episodes")  # absent from a summary written before it was counted
+        cells.append("—" if loops is None else f"{int(loops)} of {int(r['n'])}")
         body.append(cells)
     return Table(f"Camera use ({sim} simulator; means over episodes)", head, body)
 

@@ -25,6 +25,7 @@ import numpy as np
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.pare.stats import RunStats
+from pirl.world.metrics import LOOP_CELLS
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +42,7 @@ COLUMNS = (
     + ["act", "seeds"]
     + [f"{m}_{s}" for m in HEADLINE for s in ("iqm", "iqm_lo", "iqm_hi", "mean_lo", "mean_hi")]
     + [f"{m}_mean" for m in OTHER]
-    + ["label"]
+    + ["loop_episodes", "label"]
 )
 SITE_PREFIX = "site:"
 """The ``size`` of a site's episode rows: ``site:<name>`` (its grid size is ``grid``)."""
@@ -161,9 +162,16 @@ def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row[f"{metric}_{key}"] = est[key]
         for metric in OTHER:
             row[f"{metric}_mean"] = float(np.mean([g.get(metric, 0.0) for g in group]))
+        row["loop_episodes"] = loop_episodes(group)
         row["label"] = honest_label(group[0].get("label", method), _sources(group))
         rows.append(row)
     return rows
+
+
+def loop_episodes(group: list[dict[str, Any]]) -> int:
+    """Episodes of ``group`` that ended in a loop: their last 60 steps visited fewer than 10
+    cells (``tail_cells``; rows written before it was measured do not count)."""
+    return sum(1 for g in group if g.get("tail_cells", LOOP_CELLS) < LOOP_CELLS)
 
 
 def _sources(group: list[dict[str, Any]]) -> list[str]:
