@@ -148,8 +148,8 @@ class VCPPConfig(Settings, section="env"):
     False is the paper's observation."""
     obs_visits_cap: int = 3
     """With obs_visits: the count at which a cell's visits saturate (the window holds
-    min(v, cap)/cap). Below a cap a looping greedy policy sees its loop change; above it its
-    observation repeats exactly and so does its choice."""
+    min(v, cap)/cap). Until a cell reaches the cap, a greedy policy looping over it sees the
+    loop in its window; after that only the battery and step scalars change."""
     obs_target: bool = False
     """Add the direction to the nearest coverable cell not yet covered and its distance in
     cells (saturating at 16), so a policy trained on a small world can find the work left on a

@@ -35,12 +35,11 @@ def run_episode(
     policy.reset(env.world, 0, seed=seed)
     frames = [env.render()] if record else []
     tail = PathTail(1)
-    only = np.zeros(1, dtype=np.int64)
     done = False
     step = 0
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
-        tail.record(env.world, only)
+        tail.record(env.world)
         done = terminated or truncated
         step += 1
         if record and (done or step % frame_every == 0):

@@ -245,14 +245,13 @@ def run_physics_episode(
     obs, info = mission.reset(seed)
     policy.reset(mission.world, 0, seed=seed)
     tail = PathTail(1)
-    only = np.zeros(1, dtype=np.int64)
     with PyFlytFlight(mission) as flight:
         done = False
         while not done:
             mission.begin_step(int(policy.act(obs, info)))
             pose = flight.fly(mission)
             obs, terminated, truncated, info = mission.end_step(pose)
-            tail.record(mission.world, only)
+            tail.record(mission.world)
             done = terminated or truncated
     return {**mission.metrics(), "tail_cells": tail.distinct(0)}
 

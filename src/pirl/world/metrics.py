@@ -32,8 +32,10 @@ class PathTail:
     def __init__(self, n: int) -> None:
         self.cells = np.full((n, LOOP_WINDOW), -1, dtype=np.int64)
 
-    def record(self, world: WorldBatch, live: np.ndarray) -> None:
-        """Note the cell where each world of ``live`` is after its step."""
+    def record(self, world: WorldBatch, live: np.ndarray | None = None) -> None:
+        """Note the cell where each world of ``live`` (default: every world) is after its step."""
+        if live is None:
+            live = np.arange(len(self.cells))
         st = world.status[live]
         _, ny, nz = world.cfg.size
         code = (st["x"] * ny + st["y"]) * nz + st["z"]
