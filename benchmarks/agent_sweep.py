@@ -109,6 +109,11 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory-path-dense-surveyed": overrides(
         env=PATH, train={"obstacles": [4, 10], "surveyed_start": 0.5}
     ),
+    # ... or a scalar that keeps climbing inside a loop: the steps since coverage last grew.
+    "masked-memory-path-stall": overrides(env={**PATH, "obs_stall": True}),
+    "masked-memory-path-dense-stall": overrides(
+        env={**PATH, "obs_stall": True}, train={"obstacles": [4, 10]}
+    ),
 }
 
 # Cluttered generated worlds: 8-20 spheres where the evaluation's have 2-5 (a held-out family).

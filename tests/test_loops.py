@@ -52,3 +52,33 @@ def test_a_loop_flown_in_physics_has_the_same_tail():
     cfg = OPEN.replace(max_steps=LOOP_WINDOW + 4, scale_by_alpha=False)
     m = run_physics_episode(cfg, Pendulum(), seed=3, physics=PhysicsConfig())
     assert m["steps"] == LOOP_WINDOW + 4 and m["tail_cells"] == 2
+
+
+def test_the_stall_scalar_climbs_inside_a_loop_and_resumes_exactly():
+    from pirl.env.observation import STALL_RANGE, obs_size_for
+
+    cfg = OPEN.replace(obs_stall=True, obs_visits=True)
+    env = VCPPEnv(cfg)
+    assert obs_size_for(cfg) == obs_size_for(OPEN.replace(obs_visits=True)) + 1
+    stall = 2 * cfg.obs_window**2 + cfg.obs_global**2 + N_SCALARS + cfg.obs_window**2
+    obs, _ = env.reset(seed=3)
+    assert obs[stall] == 0.0
+    pendulum, seen, flat = Pendulum(), [], 0
+    for _ in range(45):
+        action = int(np.argmax(pendulum.probabilities(obs[None])[0]))
+        obs, _, _, _, info = env.step(action)
+        flat = 0 if info["new_cells"] > 0 else flat + 1
+        seen.append(obs[stall])
+        assert obs[stall] == min(flat, STALL_RANGE) / STALL_RANGE
+        if len(seen) == 30:
+            saved = env.state_dict()
+    assert seen[-1] == 1.0 and max(seen[:3]) < 0.1  # the loop's first views still find cells
+    # A checkpoint taken inside the loop carries the counter; one from before it starts there.
+    again = VCPPEnv(cfg)
+    again.reset(seed=0)
+    again.load_state_dict(saved)
+    assert again.world.progress[0] == env.world.progress[0]
+    core = {**saved["core"], "world": dict(saved["core"]["world"])}
+    del core["world"]["progress"]
+    again.load_state_dict({**saved, "core": core})
+    assert again.world.progress[0] == again.world.status[0]["steps"]

@@ -317,6 +317,8 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
     assert sorted(p.name for p in missions.iterdir()) == ["block-learned", "block-planner"]
     learned = json.loads((missions / "block-learned" / "summary.json").read_text())
     assert "ppo-ewri-s1" in learned["method"]
+    # Chosen by its VCR in the headline act mode, written acting in that mode.
+    assert f"act {cfg.reproduce.headline_act}" in learned["method"]
     for name in ("block-learned", "block-planner"):
         flown = json.loads((missions / name / "flown.json").read_text())
         assert 0 < flown["vcr"] <= 1 and flown["end"]

@@ -45,6 +45,7 @@ from pirl.advice.cache import open_store
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.config import grid, safe_state
+from pirl.config.world import OBS_BLOCKS
 from pirl.world.state import WorldBatch
 
 FIELDS = ("pan", "tilt", "zoom", "dx", "dy", "dz")
@@ -143,7 +144,7 @@ def teacher_key(advisor: Any, prompt_variant: str, env_cfg: Any) -> str:
     # Optional observation blocks change the features; the default layout keeps its old keys.
     parts += [
         f"{name}={getattr(env_cfg, name)}"
-        for name in ("obs_visits", "obs_target", "obs_target_path")
+        for name in OBS_BLOCKS
         if getattr(env_cfg, name, False)
     ]  # fmt: skip
     if env_cfg.obs_visits and env_cfg.obs_visits_cap != 3:

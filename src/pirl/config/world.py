@@ -53,6 +53,10 @@ EWRI_RANGES = (
 )
 """The EWRI (low, high) uniform ranges, in the order of REWARD_TERMS."""
 
+OBS_BLOCKS = ("obs_visits", "obs_target", "obs_target_path", "obs_stall")
+"""The settings of the observation's optional blocks: a trained policy acts only with the
+blocks it was trained with."""
+
 
 def zoom_to_tenths(zoom: float, key: str = "zoom") -> int:
     """Convert a zoom factor to integer tenths, refusing values off the 0.1 grid."""
@@ -158,6 +162,11 @@ class VCPPConfig(Settings, section="env"):
     """With obs_target: find that cell by moves at the UAV's altitude around blocked cells
     (breadth-first) and give the direction of the path's first move and its length, instead of
     the straight line, which can point into a wall and trap a greedy policy in front of it."""
+    obs_stall: bool = False
+    """Add one scalar: the steps since coverage last grew, min(s, 32)/32. Inside a loop
+    nothing else the policy sees changes once the visit counts saturate; this climbs by 1/32
+    a step, so a policy that has learned what a long stall means can act on it. False is the
+    paper's observation."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
     max_memory_gb: float = 0.0

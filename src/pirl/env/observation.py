@@ -16,6 +16,7 @@ next 11               scalars      x/(X-1), y/(Y-1), z/(Z-1), tilt/90, (pan+90)/
                                    steps left / step limit, blocked above, blocked below
 next W*W (obs_visits) (W, W)       local window: visits of each cell at the UAV's altitude
                                    this episode, min(v, C) / C (C = obs_visits_cap, 3)
+next 1 (obs_stall)    scalar       steps since coverage last grew, min(s, 32) / 32
 next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered (ground
                                    plane): (dx/d + 1)/2, (dy/d + 1)/2, min(d, 16)/16; 0.5,
                                    0.5, 0 when none is left or the UAV is above one. With
@@ -25,7 +26,7 @@ next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered
                                    (the straight line when none is reachable at that altitude)
 ====================  ===========  ==========================================================
 
-The last two blocks are off by default (the paper's observation: 317 values).
+The last three blocks are off by default (the paper's observation: 317 values).
 """
 
 from __future__ import annotations
@@ -40,9 +41,10 @@ from pirl.world.dynamics import BATCH_KERNEL
 
 N_SCALARS = 11
 N_TARGET = 3
+STALL_RANGE = 32.0  # steps: the stall scalar saturates here
 TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
 # Bits of ObsLayout.extras: which optional blocks the observation has.
-EXTRA_VISITS, EXTRA_TARGET, EXTRA_PATH = 1, 2, 4
+EXTRA_VISITS, EXTRA_TARGET, EXTRA_PATH, EXTRA_STALL = 1, 2, 4, 8
 # The four horizontal moves, in the order of the actions 0-3 (x+, x-, y+, y-).
 MOVE_DX = (1, -1, 0, 0)
 MOVE_DY = (0, 0, 1, -1)
@@ -54,20 +56,27 @@ class ObsLayout(NamedTuple):
     window: int
     """Side W of the local windows (odd)."""
     extras: int
-    """Bits ``EXTRA_VISITS | EXTRA_TARGET`` of the optional blocks present."""
+    """Bits ``EXTRA_*`` of the optional blocks present."""
     visits_cap: int
     """Visit count at which the visits window saturates."""
 
 
-def obs_size(window: int, global_side: int, visits: bool = False, target: bool = False) -> int:
+def obs_size(
+    window: int,
+    global_side: int,
+    visits: bool = False,
+    target: bool = False,
+    stall: bool = False,
+) -> int:
     """Length of the observation vector."""
     n = 2 * window * window + global_side * global_side + N_SCALARS
-    return n + (window * window if visits else 0) + (N_TARGET if target else 0)
+    n += (window * window if visits else 0) + (1 if stall else 0)
+    return n + (N_TARGET if target else 0)
 
 
 def obs_size_for(cfg: VCPPConfig) -> int:
     """Length of the observation vector of an environment config."""
-    return obs_size(cfg.obs_window, cfg.obs_global, cfg.obs_visits, cfg.obs_target)
+    return obs_size(cfg.obs_window, cfg.obs_global, cfg.obs_visits, cfg.obs_target, cfg.obs_stall)
 
 
 def obs_layout(cfg: VCPPConfig) -> ObsLayout:
@@ -76,6 +85,7 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
         (EXTRA_VISITS if cfg.obs_visits else 0)
         | (EXTRA_TARGET if cfg.obs_target else 0)
         | (EXTRA_PATH if cfg.obs_target_path else 0)
+        | (EXTRA_STALL if cfg.obs_stall else 0)
     )
     return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap))
 
@@ -199,6 +209,9 @@ def observation(w, p, layout, e, out):
                 v = w.visits[e, i, j, z] if (0 <= i < sx and 0 <= j < sy) else 0
                 o[k] = min(v, cap) / cap
                 k += 1
+    if extras & EXTRA_STALL:
+        o[k] = min(st["steps"] - w.progress[e], STALL_RANGE) / STALL_RANGE
+        k += 1
     if extras & EXTRA_TARGET:
         moves = -1
         if extras & EXTRA_PATH and not (coverable[e, x, y] and views[e, x, y] == 0):

@@ -4,8 +4,9 @@ planner's mission and the best learned policy's, written by ``pirl plan``'s writ
 (``pirl fly``), and the report's table and figure of them.
 
 "Best learned policy": the trained run with the highest mean VCR on that site in the grid
-evaluation (headline act mode), acting greedy as ``pirl plan`` does: a choice for display,
-named as such in the table, not a result.
+evaluation in the headline act mode, written acting in that same mode (stochastic: one seeded
+episode, as fixed as a greedy one once written): a choice for display, named as such in the
+table, not a result.
 """
 
 from __future__ import annotations
@@ -63,7 +64,8 @@ def _mission(
         summary = json.loads((folder / "summary.json").read_text())
     else:
         shutil.rmtree(folder, ignore_errors=True)  # a half-made one from an interrupted run
-        env, chosen, what = mission_source(cfg.env, SCENARIO_SEED, policy, method, "greedy", site)
+        act = cfg.reproduce.headline_act  # the act mode the run was chosen by
+        env, chosen, what = mission_source(cfg.env, SCENARIO_SEED, policy, method, act, site)
         summary = write_mission(folder, env, cfg.mission, chosen, SCENARIO_SEED, what)
     log(f"missions: flying {folder.name} back from its files in PyFlyt")
     flown = fly_mission(folder, cfg.physics, log=lambda line: log(f"missions: {line}"))
@@ -154,7 +156,8 @@ def section(rows: list[tuple[str, str, list[dict[str, Any]]]], report: Path) -> 
         intro=[
             f"Each mission is one episode of scenario {SCENARIO_SEED} (wind off) written by "
             "`pirl plan`, then read back from its .plan files and flown in PyFlyt with the "
-            "physics section's wind (`pirl fly`). Learned: the trained run named, acting greedy."
+            "physics section's wind (`pirl fly`). Learned: the trained run named, acting in the "
+            "act mode it was chosen by."
         ],
         level=2,
     )

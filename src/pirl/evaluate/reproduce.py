@@ -270,6 +270,7 @@ def settings_line(cfg: RunConfig) -> str:
         ("visit counts", env.obs_visits),
         ("way to the nearest uncovered cell", env.obs_target and not env.obs_target_path),
         ("path round obstacles to the nearest uncovered cell", env.obs_target_path),
+        ("steps since coverage last grew", env.obs_stall),
     )
     blocks = [name for name, on in named if on]
     masks = (

@@ -30,7 +30,7 @@ from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_
 from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.config.world import VCPPConfig
+from pirl.config.world import OBS_BLOCKS, VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import SITE_PREFIX, write_summary
 
@@ -449,7 +449,7 @@ def _check_observations(plan: EvalPlan) -> None:
         if spec.source in BUILTIN or not folder.has_config:
             continue
         trained = folder.config.env
-        for key in ("obs_window", "obs_global", "obs_visits", "obs_target", "obs_target_path"):
+        for key in ("obs_window", "obs_global", *OBS_BLOCKS):
             if getattr(trained, key) != getattr(plan.env, key):
                 raise ConfigError(
                     f"{spec.source} was trained with {key}={getattr(trained, key)}, "

@@ -243,6 +243,8 @@ def close_step(w, p, e, out):
     f["truncated"] = (not terminated) and st["steps"] >= p.step_limit
     f["wind"] = out.wind
     f["new_cells"] = new
+    if new > 0:
+        w.progress[e] = st["steps"]
 
 
 @numba.njit(cache=True, inline="always")

@@ -64,7 +64,7 @@ FLAGS_DTYPE = np.dtype(
 
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
-    "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all",
+    "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all", "progress",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -113,6 +113,9 @@ class WorldArrays(NamedTuple):
     coverable_all: np.ndarray
     """(N,) coverable cells of the world's site, seeable or not (= the coverable count of a
     sphere world)."""
+    progress: np.ndarray
+    """(N,) the step at which the world's coverage last grew (0 at reset): the observation's
+    stall scalar is ``steps - progress``."""
     terms: np.ndarray
     """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
@@ -282,6 +285,7 @@ def _reset_bookkeeping(w, p, e, work):
     w.visits[e] = 0
     w.blk_todo[e] = 0
     w.blk_total[e] = 0
+    w.progress[e] = 0
     n = 0
     covered = 0
     x0, y0, x1, y1 = work
@@ -343,6 +347,7 @@ class WorldBatch:
             obstacles=np.zeros((num, self.max_obstacles, 4), dtype=np.float64),
             occluding=np.zeros((num, sx, sy, sz), dtype=np.bool_),
             coverable_all=np.zeros(num, dtype=np.int64),
+            progress=np.zeros(num, dtype=np.int64),
             terms=np.zeros((num, D.N_TERMS), dtype=np.float64),
             flags=np.zeros(num, dtype=FLAGS_DTYPE),
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
@@ -374,11 +379,16 @@ class WorldBatch:
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
-        missing = set(STATE_ARRAYS) - set(state)
+        missing = set(STATE_ARRAYS) - set(state) - {"progress"}
         if missing:
             raise ValueError(f"world state lacks {sorted(missing)}")
         for name in STATE_ARRAYS:
-            getattr(self.arrays, name)[...] = state[name]
+            if name in state:
+                getattr(self.arrays, name)[...] = state[name]
+        if "progress" not in state:
+            # A checkpoint from before the stall scalar: only obs_stall reads it, and no such
+            # run had it on.
+            self.arrays.progress[...] = self.arrays.status["steps"]
 
     # -- reset ----------------------------------------------------------------------------
     def reset_world(self, e: int, rng: np.random.Generator) -> Scenario:
