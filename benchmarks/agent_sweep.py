@@ -114,6 +114,19 @@ VARIANTS: dict[str, dict[str, dict]] = {
     "masked-memory-path-dense-stall": overrides(
         env={**PATH, "obs_stall": True}, train={"obstacles": [4, 10]}
     ),
+    # ... or PIRL trained as long as PPO-EWRI (409,600 steps: the budget at which every
+    # greedy-sampled gap on 30/45/60 closed, "The budget" in docs/results.md).
+    "masked-memory-path-pirl409": overrides(
+        env=PATH, train={"steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}}
+    ),
+    "masked-memory-path-pirl409-stall": overrides(
+        env={**PATH, "obs_stall": True},
+        train={"steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}},
+    ),
+    "masked-memory-path-pirl409-dense-stall": overrides(
+        env={**PATH, "obs_stall": True},
+        train={"obstacles": [4, 10], "steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}},
+    ),
 }
 
 # Cluttered generated worlds: 8-20 spheres where the evaluation's have 2-5 (a held-out family).
