@@ -42,6 +42,8 @@ PAPER_OBS = {"obs_visits": False, "obs_target": False}
 MEMORY = {"obs_visits": True, "obs_target": True}
 PATH = {**MEMORY, "obs_target_path": True}
 FIXED = {"camera_start": "fixed"}  # training starts at the paper's camera pose
+# PIRL trained as long as PPO-EWRI (quick's budgets since "PIRL's budget", docs/results.md).
+PIRL409 = {"ppo-ewri": 409600, "pirl": 409600}
 
 
 def overrides(masks: bool = True, env=MEMORY, ppo=None, train=None) -> dict[str, dict]:
@@ -116,16 +118,14 @@ VARIANTS: dict[str, dict[str, dict]] = {
     ),
     # ... or PIRL trained as long as PPO-EWRI (409,600 steps: the budget at which every
     # greedy-sampled gap on 30/45/60 closed, "The budget" in docs/results.md).
-    "masked-memory-path-pirl409": overrides(
-        env=PATH, train={"steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}}
-    ),
+    "masked-memory-path-pirl409": overrides(env=PATH, train={"steps_by_method": PIRL409}),
     "masked-memory-path-pirl409-stall": overrides(
         env={**PATH, "obs_stall": True},
-        train={"steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}},
+        train={"steps_by_method": PIRL409},
     ),
     "masked-memory-path-pirl409-dense-stall": overrides(
         env={**PATH, "obs_stall": True},
-        train={"obstacles": [4, 10], "steps_by_method": {"ppo-ewri": 409600, "pirl": 409600}},
+        train={"obstacles": [4, 10], "steps_by_method": PIRL409},
     ),
 }
 
