@@ -133,12 +133,22 @@ VARIANTS: dict[str, dict[str, dict]] = {
 CLUTTER = {"obstacles_min": 8, "obstacles_max": 20}
 
 
-def worlds_of(base_env, sizes, clutter: list[str], sites: list[str], wind: bool = True):
+def worlds_of(
+    base_env,
+    sizes,
+    clutter: list[str],
+    sites: list[str],
+    wind: bool = True,
+    guard: int | None = None,
+):
     """(name, env config with size or site, grid size) of every world family to play; without
-    ``wind`` the grid's random wind pushes are off (the PyFlyt flight has none either)."""
+    ``wind`` the grid's random wind pushes are off (the PyFlyt flight has none either); with
+    ``guard`` every world plays under that stall guard, whatever the run trained with."""
     from pirl.world.seeable import with_site
 
     base_env = base_env.replace(site="", ground_cells=0)  # a run may have trained on a site
+    if guard is not None:
+        base_env = base_env.replace(stall_guard=guard)
     if not wind:
         base_env = base_env.replace(wind_prob=0.0)
     out = [(size_name(s), base_env.replace(size=s), s) for s in sizes]
@@ -185,6 +195,10 @@ def main() -> None:
     parser.add_argument("--no-wind", action="store_true",
                         help="no random wind pushes in the grid (as in PyFlyt); results go to "
                         "sweep-nowind.md/.csv")  # fmt: skip
+    parser.add_argument("--stall-guard", type=int, default=None,
+                        help="play every world under this env.stall_guard (0: off), "
+                        "whatever the runs trained with; results go to "
+                        "sweep[-nowind]-guardN.md/.csv")  # fmt: skip
     parser.add_argument("--split", default="validation", choices=("validation", "evaluation"))
     parser.add_argument("--workers", type=int, default=None, help="training processes")
     parser.add_argument("--out", type=Path, default=Path("results/agent-sweep"))
@@ -205,7 +219,8 @@ def main() -> None:
     sizes = [parse_size(s) for s in args.sizes]
     planner = {}
     wind = not args.no_wind
-    for name, env, grid_size in worlds_of(base.env, sizes, args.clutter, args.sites, wind):
+    guard = args.stall_guard
+    for name, env, grid_size in worlds_of(base.env, sizes, args.clutter, args.sites, wind, guard):
         planner[name] = planner_steps(env, pick(grid_size, args.episodes))
     rows = []
     budgets = {}
@@ -235,12 +250,12 @@ def main() -> None:
             # Every evaluation starts at the paper's camera pose (a run that trained with
             # exploring starts recorded start_camera: random before they left its env).
             trained_env = trained_env.replace(start_camera="fixed")
-            worlds = worlds_of(trained_env, sizes, args.clutter, args.sites, wind)
+            worlds = worlds_of(trained_env, sizes, args.clutter, args.sites, wind, guard)
             for world, env, grid_size in worlds:
                 seeds = pick(grid_size, args.episodes)
                 p_steps, p_vcr = planner[world]
                 for act in ("stochastic", "greedy"):
-                    per_seed_vcr, per_seed_steps, ratios, cams = [], [], [], []
+                    per_seed_vcr, per_seed_steps, ratios, cams, guided = [], [], [], [], []
                     loops = 0
                     for run in members:
                         metrics = run_batch(env, load_policy(run, act=act), seeds)
@@ -251,6 +266,7 @@ def main() -> None:
                             np.mean([m["steps"] / p for m, p in zip(metrics, p_steps, strict=True)])
                         )
                         cams.append(np.mean([m["camera_share"] for m in metrics]))
+                        guided.append(np.mean([m["guarded_steps"] / m["steps"] for m in metrics]))
                     est = interval_estimates(np.array(per_seed_vcr)[:, None])
                     rows.append({
                         "variant": variant, "method": group, "label": label,
@@ -267,6 +283,7 @@ def main() -> None:
                             100 * np.mean(per_seed_vcr) / max(1.0, np.mean(per_seed_steps))
                         ),
                         "camera_share": float(np.mean(cams)),
+                        "guarded_share": float(np.mean(guided)),
                         "loop_episodes": int(loops),
                         "episodes": len(seeds) * len(members),
                     })  # fmt: skip
@@ -275,11 +292,13 @@ def main() -> None:
                         f"{variant:>14} {group:>22} {r['size']:>8} {act:>10}  VCR IQM "
                         f"{r['vcr_iqm']:.3f} [{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] "
                         f"min {r['vcr_min_seed']:.3f}  steps x{r['steps_vs_planner']:.2f} "
-                        f"planner  cam {r['camera_share']:.2f}  loops {loops}/{r['episodes']}",
+                        f"planner  cam {r['camera_share']:.2f}  guarded {r['guarded_share']:.3f}  "
+                        f"loops {loops}/{r['episodes']}",
                         flush=True,
                     )
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = "sweep-nowind" if args.no_wind else "sweep"
+    stem = "sweep" + ("-nowind" if args.no_wind else "")
+    stem += f"-guard{guard}" if guard is not None else ""
     with open(args.out / f"{stem}.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
@@ -287,20 +306,22 @@ def main() -> None:
     lines = [
         f"Agent sweep on {args.split} scenarios ({args.episodes} per size"
         + (", no wind pushes" if args.no_wind else "")
+        + (f", every world under stall guard {guard}" if guard is not None else "")
         + "), profile "
         f"{Path(args.profile).name}, training seeds {args.seeds}; PPO steps: "
         + "; ".join(f"{v} {b}" for v, b in budgets.items())
         + "\n",
         "| variant | method | size | act | VCR IQM [95% interval] | per seed | steps "
-        "| x planner's steps | VCR / 100 steps | camera share | loop episodes |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| x planner's steps | VCR / 100 steps | camera share | guarded share | loop episodes |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['variant']} | {r['label']} | {r['size']} | {r['act']} | {r['vcr_iqm']:.3f} "
             f"[{r['vcr_iqm_lo']:.3f}, {r['vcr_iqm_hi']:.3f}] | {r['vcr_per_seed']} | "
             f"{r['steps']:.0f} | {r['steps_vs_planner']:.2f} | {r['vcr_per_100_steps']:.3f} | "
-            f"{r['camera_share']:.2f} | {r['loop_episodes']}/{r['episodes']} |"
+            f"{r['camera_share']:.2f} | {r['guarded_share']:.3f} | "
+            f"{r['loop_episodes']}/{r['episodes']} |"
         )
     text = "\n".join(lines) + "\n"
     (args.out / f"{stem}.md").write_text(text)

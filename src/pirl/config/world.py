@@ -167,6 +167,11 @@ class VCPPConfig(Settings, section="env"):
     nothing else the policy sees changes once the visit counts saturate; this climbs by 1/32
     a step, so a policy that has learned what a long stall means can act on it. False is the
     paper's observation."""
+    stall_guard: int = 0
+    """Steps without new coverage after which the action mask leaves one action, the first
+    move of the way to the nearest ground not yet covered at the UAV's altitude, until coverage
+    grows again: a rule that ends any loop, for every method and act mode alike. Episode rows
+    count the steps it chose (``guarded_steps``). 0 (off) is the paper's environment."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
     max_memory_gb: float = 0.0
@@ -248,6 +253,8 @@ class VCPPConfig(Settings, section="env"):
             raise self.refuse("start_surveyed", "must be a share in [0, 1]")
         if self.obs_visits_cap < 1:
             raise self.refuse("obs_visits_cap", "must be >= 1")
+        if self.stall_guard < 0:
+            raise self.refuse("stall_guard", "must be >= 0 (0: off)")
         if self.obs_target_path and not self.obs_target:
             raise self.refuse("obs_target_path", "needs obs_target: true (it changes that block)")
         if len(self.static_weights) != len(REWARD_TERMS):

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from pirl.config.world import VCPPConfig
-from pirl.world.dynamics import BATCH_KERNEL
+from pirl.world.dynamics import BATCH_KERNEL, path_to_work
 
 N_SCALARS = 11
 N_TARGET = 3
@@ -45,9 +45,6 @@ STALL_RANGE = 32.0  # steps: the stall scalar saturates here
 TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
 # Bits of ObsLayout.extras: which optional blocks the observation has.
 EXTRA_VISITS, EXTRA_TARGET, EXTRA_PATH, EXTRA_STALL = 1, 2, 4, 8
-# The four horizontal moves, in the order of the actions 0-3 (x+, x-, y+, y-).
-MOVE_DX = (1, -1, 0, 0)
-MOVE_DY = (0, 0, 1, -1)
 
 
 class ObsLayout(NamedTuple):
@@ -88,44 +85,6 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
         | (EXTRA_STALL if cfg.obs_stall else 0)
     )
     return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap))
-
-
-@numba.njit(cache=True, inline="always")
-def path_to_work(w, e, x, y, z, sx, sy):
-    """Breadth-first search from (x, y) over the cells free at altitude z: (dx, dy) of the first
-    move towards the nearest coverable cell not yet covered, and the number of moves; moves -1
-    when none is reachable at that altitude. Unlike the straight line, this way round an
-    obstacle never points into it, so a greedy policy that follows it cannot oscillate in
-    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
-    -1 everywhere between calls, and only the cells a search reached are reset after it, so
-    a search costs the cells it explores, not the grid (a 256 x 256 site)."""
-    queue, seen = w.path[e, 0], w.path[e, 1]
-    start = x * sy + y
-    seen[start] = 0
-    queue[0] = start
-    head, tail = 0, 1
-    while head < tail:
-        c = queue[head]
-        head += 1
-        cx, cy = c // sy, c % sy
-        if c != start and w.coverable[e, cx, cy] and w.views[e, cx, cy] == 0:
-            m = seen[c] % 4
-            found = MOVE_DX[m], MOVE_DY[m], seen[c] // 4
-            for r in range(tail):
-                seen[queue[r]] = -1
-            return found
-        for m in range(4):
-            nx, ny = cx + MOVE_DX[m], cy + MOVE_DY[m]
-            if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[e, nx, ny, z]:
-                k = nx * sy + ny
-                if seen[k] < 0:
-                    # moves * 4 + the first move of the way (inherited past the start)
-                    seen[k] = (seen[c] // 4 + 1) * 4 + (m if c == start else seen[c] % 4)
-                    queue[tail] = k
-                    tail += 1
-    for r in range(tail):
-        seen[queue[r]] = -1
-    return 0, 0, -1
 
 
 @numba.njit(cache=True, inline="always")

@@ -48,6 +48,9 @@ MOVES = np.array(
 MOVE_DELTAS: tuple[tuple[int, int, int], ...] = tuple(
     (int(dx), int(dy), int(dz)) for dx, dy, dz in MOVES
 )
+# The four horizontal moves, in the order of the actions 0-3 (x+, x-, y+, y-).
+MOVE_DX = (1, -1, 0, 0)
+MOVE_DY = (0, 0, 1, -1)
 WIND_DIRS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=np.int64)
 
 # Options of the loops over worlds (here and in pirl.env), compiled without numba's reference
@@ -152,6 +155,45 @@ def camera_action(w, e, a):
 
 
 @numba.njit(cache=True, inline="always")
+def path_to_work(w, e, x, y, z, sx, sy):
+    """Breadth-first search from (x, y) over the cells free at altitude z: (dx, dy) of the first
+    move towards the nearest coverable cell not yet covered, and the number of moves; moves -1
+    when none is reachable at that altitude. The observation's target and the stall guard of
+    :func:`action_mask` read it. Unlike the straight line, this way round an
+    obstacle never points into it, so a greedy policy that follows it cannot oscillate in
+    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
+    -1 everywhere between calls, and only the cells a search reached are reset after it, so
+    a search costs the cells it explores, not the grid (a 256 x 256 site)."""
+    queue, seen = w.path[e, 0], w.path[e, 1]
+    start = x * sy + y
+    seen[start] = 0
+    queue[0] = start
+    head, tail = 0, 1
+    while head < tail:
+        c = queue[head]
+        head += 1
+        cx, cy = c // sy, c % sy
+        if c != start and w.coverable[e, cx, cy] and w.views[e, cx, cy] == 0:
+            m = seen[c] % 4
+            found = MOVE_DX[m], MOVE_DY[m], seen[c] // 4
+            for r in range(tail):
+                seen[queue[r]] = -1
+            return found
+        for m in range(4):
+            nx, ny = cx + MOVE_DX[m], cy + MOVE_DY[m]
+            if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[e, nx, ny, z]:
+                k = nx * sy + ny
+                if seen[k] < 0:
+                    # moves * 4 + the first move of the way (inherited past the start)
+                    seen[k] = (seen[c] // 4 + 1) * 4 + (m if c == start else seen[c] % 4)
+                    queue[tail] = k
+                    tail += 1
+    for r in range(tail):
+        seen[queue[r]] = -1
+    return 0, 0, -1
+
+
+@numba.njit(cache=True, inline="always")
 def action_mask(w, p, e, out):
     """Write into ``out[e]`` which of world e's 12 actions can change something.
 
@@ -159,6 +201,13 @@ def action_mask(w, p, e, out):
     setting is not already at the limit it pushes towards. An invalid action is a collision or
     a camera action that holds: it only spends energy, and a policy that repeats it loops.
     At least one tilt action is always valid, so a mask never rules out every action.
+
+    The stall guard: once coverage has not grown for ``p.stall_guard`` steps (0: never), the
+    one valid action is the first move of the way to the nearest ground not yet covered at the
+    UAV's altitude (the observation's target by path), until coverage grows again. A
+    deterministic policy that a state leaves nearly indifferent can otherwise repeat a
+    two-cell loop until its battery ends (docs/results.md, "Greedy loops"). With no way open
+    at this altitude the mask is left as it is.
     """
     st = w.status[e]
     blocked = w.blocked
@@ -171,6 +220,19 @@ def action_mask(w, p, e, out):
     out[e, PAN_MINUS] = st["pan"] > PAN_MIN
     out[e, ZOOM_PLUS] = st["zoom10"] < ZOOM_MAX10
     out[e, ZOOM_MINUS] = st["zoom10"] > ZOOM_MIN10
+    if guarded(w, p, e):
+        dx, dy, moves = path_to_work(w, e, x, y, z, p.size_x, p.size_y)
+        if moves > 0:
+            out[e, :] = False
+            way = X_PLUS if dx > 0 else X_MINUS if dx < 0 else Y_PLUS if dy > 0 else Y_MINUS
+            out[e, way] = True
+
+
+@numba.njit(cache=True, inline="always")
+def guarded(w, p, e):
+    """Whether world e's next action is under the stall guard (``env.stall_guard``): its
+    coverage has not grown for that many steps."""
+    return p.stall_guard > 0 and w.status[e]["steps"] - w.progress[e] >= p.stall_guard
 
 
 @numba.njit(**BATCH_KERNEL)
@@ -217,6 +279,8 @@ def close_step(w, p, e, out):
     redundant = new == 0
     idle = not out.moved and not out.cam_changed and not out.collision
     w.energy[e] -= out.used
+    if guarded(w, p, e):
+        w.guarded[e] += 1
     st["steps"] += 1
     if out.collision:
         st["collisions"] += 1

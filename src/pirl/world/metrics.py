@@ -76,4 +76,5 @@ def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
         "final_tilt": r["tilt"],
         "final_zoom": r["zoom10"] / 10.0,
         "wind_pushes": r["wind_pushes"],
+        "guarded_steps": int(batch.guarded[e]),
     }

@@ -65,6 +65,7 @@ FLAGS_DTYPE = np.dtype(
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
     "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all", "progress",
+    "guarded",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -116,6 +117,8 @@ class WorldArrays(NamedTuple):
     progress: np.ndarray
     """(N,) the step at which the world's coverage last grew (0 at reset): the observation's
     stall scalar is ``steps - progress``."""
+    guarded: np.ndarray
+    """(N,) steps of this episode whose action the stall guard chose (``env.stall_guard``)."""
     terms: np.ndarray
     """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
@@ -171,6 +174,8 @@ class Params(NamedTuple):
     """Energy spent every step on top of the action's."""
     max_footprint: float
     """Cells of the largest possible footprint (the unit of the coverage reward term)."""
+    stall_guard: int
+    """Steps without new coverage after which the mask leaves only the way to work (0: off)."""
 
 
 @dataclass(frozen=True)
@@ -286,6 +291,7 @@ def _reset_bookkeeping(w, p, e, work):
     w.blk_todo[e] = 0
     w.blk_total[e] = 0
     w.progress[e] = 0
+    w.guarded[e] = 0
     n = 0
     covered = 0
     x0, y0, x1, y1 = work
@@ -348,6 +354,7 @@ class WorldBatch:
             occluding=np.zeros((num, sx, sy, sz), dtype=np.bool_),
             coverable_all=np.zeros(num, dtype=np.int64),
             progress=np.zeros(num, dtype=np.int64),
+            guarded=np.zeros(num, dtype=np.int64),
             terms=np.zeros((num, D.N_TERMS), dtype=np.float64),
             flags=np.zeros(num, dtype=FLAGS_DTYPE),
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
@@ -368,6 +375,7 @@ class WorldBatch:
             energy_camera=float(cfg.energy_camera),
             energy_hover=float(cfg.energy_hover),
             max_footprint=float(self.max_footprint),
+            stall_guard=int(cfg.stall_guard),
         )
         # Each array also by name (world.status, world.views, ...): the same objects, listed
         # once, in WorldArrays; plain attributes, as a step reads several of them.
@@ -379,7 +387,7 @@ class WorldBatch:
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
-        missing = set(STATE_ARRAYS) - set(state) - {"progress"}
+        missing = set(STATE_ARRAYS) - set(state) - {"progress", "guarded"}
         if missing:
             raise ValueError(f"world state lacks {sorted(missing)}")
         for name in STATE_ARRAYS:
@@ -389,6 +397,8 @@ class WorldBatch:
             # A checkpoint from before the stall scalar: only obs_stall reads it, and no such
             # run had it on.
             self.arrays.progress[...] = self.arrays.status["steps"]
+        if "guarded" not in state:  # nor the stall guard
+            self.arrays.guarded[...] = 0
 
     # -- reset ----------------------------------------------------------------------------
     def reset_world(self, e: int, rng: np.random.Generator) -> Scenario:
