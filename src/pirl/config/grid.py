@@ -36,9 +36,13 @@ def zoom_steps() -> tuple[float, ...]:
     return tuple(round(k / 10.0, 1) for k in range(ZOOM_MIN10, ZOOM_MAX10 + 1, ZOOM_STEP10))
 
 
+PAPER_NADIR_TILT = 80
+"""Tilt, degrees, from which the paper footprint's square halves (a camera looking down)."""
+
+
 def paper_half_width(tilt: int, zoom10: int) -> int:
     """Half-width of the paper footprint's square, ``floor(m * zoom + 0.5)`` with m = 2 below
     80 degrees of tilt, else 1, in integer arithmetic on the camera's steps (zoom in tenths).
     The footprint kernel compiles this very function; the prompt states it."""
-    m = 2 if tilt < 80 else 1
+    m = 2 if tilt < PAPER_NADIR_TILT else 1
     return (m * zoom10 + 5) // 10

@@ -174,7 +174,7 @@ def observation(w, p, layout, e, out):
     if extras & EXTRA_TARGET:
         moves = -1
         if extras & EXTRA_PATH and not (coverable[e, x, y] and views[e, x, y] == 0):
-            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy)
+            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy, 0)
         if moves > 0:
             o[k] = (dx + 1.0) / 2.0
             o[k + 1] = (dy + 1.0) / 2.0

@@ -18,6 +18,7 @@ from pirl.config.grid import (
     PAN_MAX,
     PAN_MIN,
     PAN_STEP,
+    PAPER_NADIR_TILT,
     TILT_MAX,
     TILT_MIN,
     TILT_STEP,
@@ -25,7 +26,7 @@ from pirl.config.grid import (
     ZOOM_MIN10,
     ZOOM_STEP10,
 )
-from pirl.world.footprint import CameraPose, footprint_cells
+from pirl.world.footprint import PAPER, CameraPose, footprint_cells, paper_half_width
 
 # Reward term columns of ``WorldArrays.terms``, in the order of pirl.config.world.REWARD_TERMS
 # (a vector, not a record: the reward is its dot product with the weights).
@@ -155,11 +156,23 @@ def camera_action(w, e, a):
 
 
 @numba.njit(cache=True, inline="always")
-def path_to_work(w, e, x, y, z, sx, sy):
+def _work_within(w, e, cx, cy, reach, sx, sy):
+    """Whether a coverable ground cell not yet covered lies within ``reach`` cells (the square
+    of half-width ``reach``) of (cx, cy)."""
+    for i in range(max(0, cx - reach), min(sx, cx + reach + 1)):
+        for j in range(max(0, cy - reach), min(sy, cy + reach + 1)):
+            if w.coverable[e, i, j] and w.views[e, i, j] == 0:
+                return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def path_to_work(w, e, x, y, z, sx, sy, reach):
     """Breadth-first search from (x, y) over the cells free at altitude z: (dx, dy) of the first
-    move towards the nearest coverable cell not yet covered, and the number of moves; moves -1
-    when none is reachable at that altitude. The observation's target and the stall guard of
-    :func:`action_mask` read it. Unlike the straight line, this way round an
+    move towards the nearest cell within ``reach`` cells of a coverable cell not yet covered
+    (0: above one), and the number of moves; moves -1 when none is reachable at that altitude.
+    The observation's target (reach 0) and the stall guard of :func:`action_mask` read it.
+    Unlike the straight line, this way round an
     obstacle never points into it, so a greedy policy that follows it cannot oscillate in
     front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
     -1 everywhere between calls, and only the cells a search reached are reset after it, so
@@ -173,7 +186,7 @@ def path_to_work(w, e, x, y, z, sx, sy):
         c = queue[head]
         head += 1
         cx, cy = c // sy, c % sy
-        if c != start and w.coverable[e, cx, cy] and w.views[e, cx, cy] == 0:
+        if c != start and _work_within(w, e, cx, cy, reach, sx, sy):
             m = seen[c] % 4
             found = MOVE_DX[m], MOVE_DY[m], seen[c] // 4
             for r in range(tail):
@@ -202,12 +215,15 @@ def action_mask(w, p, e, out):
     a camera action that holds: it only spends energy, and a policy that repeats it loops.
     At least one tilt action is always valid, so a mask never rules out every action.
 
-    The stall guard: once coverage has not grown for ``p.stall_guard`` steps (0: never), the
-    one valid action is the first move of the way to the nearest ground not yet covered at the
-    UAV's altitude (the observation's target by path), until coverage grows again. A
-    deterministic policy that a state leaves nearly indifferent can otherwise repeat a
-    two-cell loop until its battery ends (docs/results.md, "Greedy loops"). With no way open
-    at this altitude the mask is left as it is.
+    The stall guard: once coverage has not grown for ``p.stall_guard`` steps (0: never), one
+    action stays valid until coverage grows again, the first of these that exists: the first
+    move of the way, at the UAV's altitude, to the nearest ground not yet covered (the
+    observation's target by path); with the paper's camera, the first move of the way to the
+    nearest cell whose footprint, at the camera's pose now, holds such ground (ground seen
+    only from beside it, say in a courtyard); a zoom or tilt that widens that footprint; a
+    climb (more cells are free higher up). Else the mask is left as it is. A deterministic
+    policy that a state leaves nearly indifferent otherwise repeats a two-cell loop until its
+    battery ends (docs/results.md, "Greedy loops").
     """
     st = w.status[e]
     blocked = w.blocked
@@ -221,11 +237,31 @@ def action_mask(w, p, e, out):
     out[e, ZOOM_PLUS] = st["zoom10"] < ZOOM_MAX10
     out[e, ZOOM_MINUS] = st["zoom10"] > ZOOM_MIN10
     if guarded(w, p, e):
-        dx, dy, moves = path_to_work(w, e, x, y, z, p.size_x, p.size_y)
-        if moves > 0:
-            out[e, :] = False
-            way = X_PLUS if dx > 0 else X_MINUS if dx < 0 else Y_PLUS if dy > 0 else Y_MINUS
-            out[e, way] = True
+        _guard(w, p, e, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _guard(w, p, e, out):
+    """The stall guard's one action (see :func:`action_mask`), written into ``out[e]``."""
+    st = w.status[e]
+    x, y, z = st["x"], st["y"], st["z"]
+    dx, dy, moves = path_to_work(w, e, x, y, z, p.size_x, p.size_y, 0)
+    if moves < 0 and p.model == PAPER:
+        reach = paper_half_width(st["tilt"], st["zoom10"])
+        if reach > 0:
+            dx, dy, moves = path_to_work(w, e, x, y, z, p.size_x, p.size_y, reach)
+    way = -1
+    if moves > 0:
+        way = X_PLUS if dx > 0 else X_MINUS if dx < 0 else Y_PLUS if dy > 0 else Y_MINUS
+    elif p.model == PAPER and st["zoom10"] < ZOOM_MAX10:
+        way = ZOOM_PLUS
+    elif p.model == PAPER and st["tilt"] >= PAPER_NADIR_TILT:
+        way = TILT_MINUS
+    elif free(w.blocked, p, e, x, y, z + 1):
+        way = Z_PLUS
+    if way >= 0:
+        out[e, :] = False
+        out[e, way] = True
 
 
 @numba.njit(cache=True, inline="always")
