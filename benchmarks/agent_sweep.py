@@ -127,6 +127,11 @@ VARIANTS: dict[str, dict[str, dict]] = {
         env={**PATH, "obs_stall": True},
         train={"obstacles": [4, 10], "steps_by_method": PIRL409},
     ),
+    # ... or the env's stall guard (env.stall_guard: after 32 steps without new coverage the
+    # env leads the UAV to the nearest work), on in training as in evaluation.
+    "masked-memory-path-pirl409-guard32": overrides(
+        env={**PATH, "stall_guard": 32}, train={"steps_by_method": PIRL409}
+    ),
 }
 
 # Cluttered generated worlds: 8-20 spheres where the evaluation's have 2-5 (a held-out family).

@@ -168,10 +168,12 @@ class VCPPConfig(Settings, section="env"):
     a step, so a policy that has learned what a long stall means can act on it. False is the
     paper's observation."""
     stall_guard: int = 0
-    """Steps without new coverage after which the action mask leaves one action, the first
-    move of the way to the nearest ground not yet covered at the UAV's altitude, until coverage
-    grows again: a rule that ends any loop, for every method and act mode alike. Episode rows
-    count the steps it chose (``guarded_steps``). 0 (off) is the paper's environment."""
+    """Steps without new coverage after which the env takes over until coverage grows again:
+    it carries out one action, whatever the policy chose (the action mask leaves only that
+    one), the first move of the way to the nearest ground not yet covered (details:
+    ``pirl.world.dynamics.action_mask``). A rule of the env that ends any loop, for every
+    method and act mode alike; episode rows count the steps it chose (``guarded_steps``).
+    0 (off) is the paper's environment."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
     max_memory_gb: float = 0.0

@@ -251,6 +251,7 @@ class Mission:
         if not 0 <= action < D.N_ACTIONS:
             raise ValueError(f"action must be an integer in [0, {D.N_ACTIONS}); got {action}")
         w = self.world
+        action = int(D.steer(w.arrays, w.params, 0, action))  # the grid's stall guard
         origin: Cell = w.position(0)
         tilt, pan, zoom = w.camera_setting(0)
         self._camera_before = (tilt, pan, zoom)

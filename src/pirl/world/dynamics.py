@@ -216,7 +216,8 @@ def action_mask(w, p, e, out):
     At least one tilt action is always valid, so a mask never rules out every action.
 
     The stall guard: once coverage has not grown for ``p.stall_guard`` steps (0: never), one
-    action stays valid until coverage grows again, the first of these that exists: the first
+    action stays valid until coverage grows again, and :func:`step_one` carries it out
+    whatever the policy chose; the first of these that exists: the first
     move of the way, at the UAV's altitude, to the nearest ground not yet covered (the
     observation's target by path); with the paper's camera, the first move of the way to the
     nearest cell whose footprint, at the camera's pose now, holds such ground (ground seen
@@ -236,13 +237,18 @@ def action_mask(w, p, e, out):
     out[e, PAN_MINUS] = st["pan"] > PAN_MIN
     out[e, ZOOM_PLUS] = st["zoom10"] < ZOOM_MAX10
     out[e, ZOOM_MINUS] = st["zoom10"] > ZOOM_MIN10
-    if guarded(w, p, e):
-        _guard(w, p, e, out)
+    way = guard_action(w, p, e)
+    if way >= 0:
+        out[e, :] = False
+        out[e, way] = True
 
 
 @numba.njit(cache=True, inline="always")
-def _guard(w, p, e, out):
-    """The stall guard's one action (see :func:`action_mask`), written into ``out[e]``."""
+def guard_action(w, p, e):
+    """The stall guard's one action for world e now (see :func:`action_mask`), or -1 when the
+    guard is off, not yet due, or finds nothing to do."""
+    if not guarded(w, p, e):
+        return -1
     st = w.status[e]
     x, y, z = st["x"], st["y"], st["z"]
     dx, dy, moves = path_to_work(w, e, x, y, z, p.size_x, p.size_y, 0)
@@ -259,9 +265,15 @@ def _guard(w, p, e, out):
         way = TILT_MINUS
     elif free(w.blocked, p, e, x, y, z + 1):
         way = Z_PLUS
-    if way >= 0:
-        out[e, :] = False
-        out[e, way] = True
+    return way
+
+
+@numba.njit(cache=True, inline="always")
+def steer(w, p, e, a):
+    """The action world e carries out when its policy chose ``a``: the stall guard's, while
+    the guard holds (a policy that ignores the mask is steered all the same), else ``a``."""
+    way = guard_action(w, p, e)
+    return a if way < 0 else way
 
 
 @numba.njit(cache=True, inline="always")
@@ -349,7 +361,8 @@ def close_step(w, p, e, out):
 
 @numba.njit(cache=True, inline="always")
 def step_one(w, p, e, a):
-    """Apply action ``a`` to world e; fill its ``terms`` (raw reward terms) and ``flags``.
+    """Apply action ``a`` (or the stall guard's, :func:`steer`) to world e; fill its ``terms``
+    (raw reward terms) and ``flags``.
 
     Flight (a move to a free cell, else a collision) and the wind gust are the grid's own; the
     camera, the view, the visit and the step's close are the rules above, which the physics
@@ -359,6 +372,8 @@ def step_one(w, p, e, a):
     x, y, z = st["x"], st["y"], st["z"]
     tilt, pan, zoom = st["tilt"], st["pan"], st["zoom10"]
     collision = False
+    if p.stall_guard > 0:
+        a = steer(w, p, e, a)
     if a < N_MOVES:
         nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
         if free(w.blocked, p, e, nx, ny, nz):
