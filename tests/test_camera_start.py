@@ -69,6 +69,20 @@ def test_training_obstacles_reach_the_training_env_only() -> None:
         RunConfig.from_dict({"train": {"obstacles": [5, 2]}})
 
 
+def test_the_stall_guard_can_be_left_out_of_training_only() -> None:
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(
+        env={"stall_guard": 32}, train={"stall_guard": 0}
+    )
+    assert training_env(resolved_config("ppo-ewri", cfg)).stall_guard == 0
+    assert resolved_config("ppo-ewri", cfg).env.stall_guard == 32  # what evaluations build
+    plain = RunConfig.from_yaml(TEST_CFG).with_overrides(env={"stall_guard": 32})
+    assert training_env(resolved_config("ppo-ewri", plain)).stall_guard == 32
+    with pytest.raises(ConfigError, match="train.stall_guard"):
+        RunConfig.from_dict({"train": {"stall_guard": -1}})
+    with pytest.raises(ConfigError, match="env.stall_guard"):
+        RunConfig.from_dict({"env": {"stall_guard": -1}})
+
+
 def test_surveyed_starts_leave_one_box_of_work() -> None:
     cfg = VCPPConfig(size=(15, 15, 3), start_surveyed=1.0)
     plain = draw_scenario(VCPPConfig(size=(15, 15, 3)), np.random.default_rng(3))

@@ -233,6 +233,10 @@ def test_camera_table_gives_steps_relative_to_the_planner():
     assert ewri[-3] == "1.50" and ewri[-2] == "0.30" and ewri[-1] == "3 of 8"
     planner = next(row for row in table.rows if row[0] == "planner")
     assert planner[-1] == "—"
+    assert "steps chosen by the stall guard" not in table.header  # no guard, no column
+    guarded = camera_table([row("ppo-ewri", "PPO-EWRI", 300.0, 0.9, guarded_share_mean=0.031)])
+    assert guarded.header[-1] == "steps chosen by the stall guard"
+    assert guarded.rows[0][-1] == "3.1%"
 
 
 def test_summary_counts_the_episodes_that_ended_in_a_loop():
@@ -258,6 +262,9 @@ def test_report_settings_line_says_masked_or_not():
         train={"camera_start": "random"}
     )
     assert "random camera poses" in settings_line(starts)
+    assert "stall guard" not in paper
+    guard = RunConfig.from_yaml(root / "paper.yaml").with_overrides(env={"stall_guard": 32})
+    assert "stall guard on: after 32 steps" in settings_line(guard)
 
 
 def test_a_run_is_evaluated_only_with_its_own_observation(trained_runs, tmp_path):

@@ -73,15 +73,18 @@ def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
 
 
 def training_env(cfg: RunConfig) -> VCPPConfig:
-    """The resolved env with ``train.camera_start``, ``surveyed_start`` and ``obstacles``
-    applied: exploring starts, work out of sight and denser worlds are ways of training, so
-    they stay out of the env that config.yaml records and evaluations build."""
+    """The resolved env with ``train.camera_start``, ``surveyed_start``, ``obstacles`` and
+    ``stall_guard`` applied: exploring starts, work out of sight, denser worlds and training
+    with or without the guard are ways of training, so they stay out of the env that
+    config.yaml records and evaluations build."""
     env = cfg.env.replace(
         start_camera=cfg.train.camera_start, start_surveyed=cfg.train.surveyed_start
     )
     if cfg.train.obstacles:
         low, high = cfg.train.obstacles
         env = env.replace(obstacles_min=int(low), obstacles_max=int(high))
+    if cfg.train.stall_guard is not None:
+        env = env.replace(stall_guard=int(cfg.train.stall_guard))
     return env
 
 

@@ -94,6 +94,10 @@ class TrainSettings(Settings, section="train"):
     """Training worlds' fewest and most obstacle spheres, ``[min, max]``, in place of the env's
     (evaluation keeps the env's): denser worlds than the evaluation's, so that a policy meets
     the clutter of larger worlds and sites while it learns. Empty: the env's."""
+    stall_guard: int | None = None
+    """``env.stall_guard`` while training, in place of the env's (evaluation keeps the env's);
+    None: the env's. 0 trains without the guard a policy that is evaluated with it, which is
+    what validation chose for ``quick`` (docs/results.md, "The stall guard")."""
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
@@ -109,6 +113,8 @@ class TrainSettings(Settings, section="train"):
             len(self.obstacles) != 2 or not 0 <= self.obstacles[0] <= self.obstacles[1]
         ):
             raise self.refuse("obstacles", "write [min, max] with 0 <= min <= max, or leave it out")
+        if self.stall_guard is not None and self.stall_guard < 0:
+            raise self.refuse("stall_guard", "must be >= 0 (0: off), or leave it out")
         for name, steps in self.steps_by_method.items():
             if steps <= 0:
                 raise self.refuse("steps_by_method", f"{name}: must be > 0")

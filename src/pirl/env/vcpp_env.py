@@ -36,6 +36,10 @@ class VCPPEnv(gym.Env):
     [0, 90] degrees (90 looks straight down), pan in [-90, 90] (0 = +x), zoom in [0.5, 2.0].
     ``action_masks()`` and ``info["action_mask"]`` give the actions that can change something
     (12 booleans; never all False), for masked policies such as sb3-contrib's ``MaskablePPO``.
+    With ``stall_guard=N`` (0, off, is the paper's) the env takes over after N steps without
+    new coverage: it carries out one action, whatever the policy chose, leading the UAV to the
+    nearest ground not yet covered, until coverage grows (the mask shows only that action;
+    ``episode_metrics["guarded_steps"]`` counts them).
 
     ## Observation Space
     ``Box(0, 1, (2*W*W + G*G + 11,), float32)`` with ``W = obs_window`` (11) and

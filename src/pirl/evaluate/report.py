@@ -165,8 +165,8 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
     """Camera use beside coverage: per method, size and act mode, the share of camera
     actions, mean footprint, final tilt and zoom, steps, steps relative to the planner's on
     the same scenarios (mean steps over mean planner steps), VCR per 100 steps and the episodes
-    that ended in a loop (their last 60 steps in fewer than 10 cells); None without rows of
-    ``sim``."""
+    that ended in a loop (their last 60 steps in fewer than 10 cells), and where the env's stall
+    guard chose any action, the share of steps it chose; None without rows of ``sim``."""
     from pirl.agents.boustrophedon import BoustrophedonPolicy
 
     sim_rows = [r for r in rows if r["sim"] == sim]
@@ -177,6 +177,9 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
     }
     head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
     head += ["steps / planner's", "VCR per 100 steps", "episodes ending in a loop"]
+    guard = any(r.get("guarded_share_mean", 0.0) > 0 for r in sim_rows)
+    if guard:  # the env's stall guard chose some actions: say how many, per row
+        head.append("steps chosen by the stall guard")
     order = sorted(
         sim_rows,
         key=lambda r: (
@@ -193,6 +196,8 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
         cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
         loops = r.get("loop_episodes")  # absent from a summary written before it was counted
         cells.append("—" if loops is None else f"{int(loops)} of {int(r['n'])}")
+        if guard:
+            cells.append(f"{r.get('guarded_share_mean', 0.0):.1%}")
         body.append(cells)
     return Table(f"Camera use ({sim} simulator; means over episodes)", head, body)
 

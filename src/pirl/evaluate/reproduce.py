@@ -289,7 +289,14 @@ def settings_line(cfg: RunConfig) -> str:
         if cfg.train.camera_start != "fixed"
         else ""
     )
-    return f"Agents: {masks}; {seen}{starts} (docs/deviations.md)."
+    guard = (
+        f"; the env's stall guard on: after {env.stall_guard} steps without new coverage it "
+        "leads the UAV to the nearest uncovered ground, for every method (the camera table "
+        "gives the share of steps it chose)"
+        if env.stall_guard
+        else ""
+    )
+    return f"Agents: {masks}; {seen}{starts}{guard} (docs/deviations.md)."
 
 
 def _advisor_stats(

@@ -34,7 +34,7 @@ BOOTSTRAP_REPS = 1000
 POI_REPS = 1000
 OTHER = (
     "overlap", "views_per_cell", "steps", "collisions", "battery_left", "camera_share",
-    "mean_footprint", "final_tilt", "final_zoom", "llm_calls",
+    "mean_footprint", "final_tilt", "final_zoom", "llm_calls", "guarded_share",
 )  # fmt: skip
 COLUMNS = (
     ["method", "sim", "size", "n"]

@@ -76,5 +76,7 @@ def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
         "final_tilt": r["tilt"],
         "final_zoom": r["zoom10"] / 10.0,
         "wind_pushes": r["wind_pushes"],
+        # The env's stall guard (env.stall_guard) chose these steps' actions, not the policy.
         "guarded_steps": int(batch.guarded[e]),
+        "guarded_share": int(batch.guarded[e]) / steps if steps else 0.0,
     }
