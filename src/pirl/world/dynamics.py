@@ -172,9 +172,8 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
     move towards the nearest cell within ``reach`` cells of a coverable cell not yet covered
     (0: above one), and the number of moves; moves -1 when none is reachable at that altitude.
     The observation's target (reach 0) and the stall guard of :func:`action_mask` read it.
-    Unlike the straight line, this way round an
-    obstacle never points into it, so a greedy policy that follows it cannot oscillate in
-    front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
+    Unlike the straight line, this way round an obstacle never points into it, so a greedy
+    policy that follows it cannot oscillate in front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
     -1 everywhere between calls, and only the cells a search reached are reset after it, so
     a search costs the cells it explores, not the grid (a 256 x 256 site)."""
     queue, seen = w.path[e, 0], w.path[e, 1]
@@ -217,14 +216,14 @@ def action_mask(w, p, e, out):
 
     The stall guard: once coverage has not grown for ``p.stall_guard`` steps (0: never), one
     action stays valid until coverage grows again, and :func:`step_one` carries it out
-    whatever the policy chose; the first of these that exists: the first
-    move of the way, at the UAV's altitude, to the nearest ground not yet covered (the
-    observation's target by path); with the paper's camera, the first move of the way to the
-    nearest cell whose footprint, at the camera's pose now, holds such ground (ground seen
-    only from beside it, say in a courtyard); a zoom or tilt that widens that footprint; a
-    climb (more cells are free higher up). Else the mask is left as it is. A deterministic
-    policy that a state leaves nearly indifferent otherwise repeats a two-cell loop until its
-    battery ends (docs/results.md, "Greedy loops").
+    whatever the policy chose; the first of these that exists: the first move of the way, at
+    the UAV's altitude, to the nearest ground not yet covered (the observation's target by
+    path); with the paper's camera, the first move of the way to the nearest cell whose
+    footprint, at the camera's pose now, holds such ground (ground seen only from beside it,
+    say in a courtyard); a zoom or tilt that widens that footprint; a climb (more cells are
+    free higher up). Else the mask is left as it is. A deterministic policy that a state
+    leaves nearly indifferent otherwise repeats a two-cell loop until its battery ends
+    (docs/results.md, "The stall guard").
     """
     st = w.status[e]
     blocked = w.blocked
