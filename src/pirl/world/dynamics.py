@@ -173,9 +173,10 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
     (0: above one), and the number of moves; moves -1 when none is reachable at that altitude.
     The observation's target (reach 0) and the stall guard of :func:`action_mask` read it.
     Unlike the straight line, this way round an obstacle never points into it, so a greedy
-    policy that follows it cannot oscillate in front of a wall. Uses ``w.path[e]`` as scratch (the kernels allocate nothing): ``seen`` is
-    -1 everywhere between calls, and only the cells a search reached are reset after it, so
-    a search costs the cells it explores, not the grid (a 256 x 256 site)."""
+    policy that follows it cannot oscillate in front of a wall. Uses ``w.path[e]`` as scratch
+    (the kernels allocate nothing): ``seen`` is -1 everywhere between calls, and only the
+    cells a search reached are reset after it, so a search costs the cells it explores, not
+    the grid (a 256 x 256 site)."""
     queue, seen = w.path[e, 0], w.path[e, 1]
     start = x * sy + y
     seen[start] = 0
