@@ -50,7 +50,7 @@ from pirl.advice.state import prompt_state
 from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
 from pirl.pare.bundle import AdviceBundle
-from pirl.pare.vec_env import PAREVecEnv
+from pirl.pare.sb3_vec import PAREVecEnv
 
 SETTINGS = {"size": (15, 15, 3), "reward": "ewri", "llm_weight": True}
 

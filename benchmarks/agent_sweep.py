@@ -29,10 +29,10 @@ import yaml
 
 from pirl.agents.loading import load_policy
 from pirl.config.run import RunConfig
-from pirl.evaluate.reproduce import steps_text, train_all
 from pirl.evaluate.rollout import run_batch, run_episode
 from pirl.evaluate.scenarios import parse_size, scenario_seeds, size_name, validation_seeds
 from pirl.evaluate.summary import interval_estimates
+from pirl.reproduce.pipeline import steps_text, train_all
 from pirl.world.metrics import LOOP_CELLS
 
 ROOT = Path(__file__).resolve().parents[1]

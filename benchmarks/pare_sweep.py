@@ -26,10 +26,10 @@ import numpy as np
 
 from pirl.agents.loading import load_policy
 from pirl.config.run import RunConfig
-from pirl.evaluate.reproduce import train_all
 from pirl.evaluate.rollout import run_batch
 from pirl.evaluate.scenarios import parse_size, size_name, validation_seeds
 from pirl.evaluate.summary import interval_estimates
+from pirl.reproduce.pipeline import train_all
 
 ROOT = Path(__file__).resolve().parents[1]
 

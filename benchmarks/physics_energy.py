@@ -28,7 +28,7 @@ from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds
 from pirl.physics import Mission
-from pirl.physics.mission import MOVE, normalized_power
+from pirl.physics.flight import MOVE, normalized_power
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.world import dynamics as D
 from pirl.world.state import Scenario

@@ -27,7 +27,7 @@ def register(gym) -> None:  # gym: the gymnasium module (typing costs start-up t
         gym.register(
             id=ENV_ID,
             entry_point="pirl.env.vcpp_env:VCPPEnv",
-            vector_entry_point="pirl.env.vector:VCPPVectorEnv",
+            vector_entry_point="pirl.env.gym_vector:VCPPVectorEnv",
         )
 
 

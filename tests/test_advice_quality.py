@@ -275,7 +275,7 @@ def test_the_unshaped_warning_says_when_a_teacher_carries_no_information():
 
 # -- 5. the curve ------------------------------------------------------------------------------
 def test_the_curve_has_measured_points_a_band_and_a_break_even(tmp_path):
-    from pirl.evaluate.advice_curve import CurveAdvisor, break_even, curve_points, plot, section
+    from pirl.report.advice_curve import CurveAdvisor, break_even, curve_points, plot, section
 
     rng = np.random.default_rng(0)
     records = []

@@ -89,7 +89,7 @@ def test_masked_policy_never_chooses_an_invalid_action(masked_ewri, act):
 
 def test_il_expert_data_respects_the_mask(masked_ewri):
     from pirl.agents.run_folder import train_seed_base
-    from pirl.env.vec_env import make_vec_env
+    from pirl.env.sb3_vec import make_vec_env
 
     cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(ppo={"action_masking": True})
     model = load_expert(masked_ewri)

@@ -18,9 +18,9 @@ import pytest
 
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.evaluate.distributed import ray_executor
-from pirl.evaluate.reproduce import train_all
+from pirl.evaluate.executors import ray_executor
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin
+from pirl.reproduce.pipeline import train_all
 
 ROOT = Path(__file__).resolve().parents[1]
 

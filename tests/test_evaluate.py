@@ -213,7 +213,7 @@ def test_seeds_are_the_unit_on_a_hand_made_table():
 
 
 def test_camera_table_gives_steps_relative_to_the_planner():
-    from pirl.evaluate.report import camera_table
+    from pirl.report.document import camera_table
 
     def row(method: str, label: str, steps: float, vcr: float, **more) -> dict:
         return {
@@ -250,7 +250,7 @@ def test_report_settings_line_says_masked_or_not():
     from pathlib import Path
 
     from pirl.config.run import RunConfig
-    from pirl.evaluate.reproduce import settings_line
+    from pirl.reproduce.pipeline import settings_line
 
     root = Path(__file__).resolve().parents[1] / "configs"
     quick = settings_line(RunConfig.from_yaml(root / "quick.yaml"))

@@ -13,9 +13,9 @@ import pytest
 from pirl.agents.pirl_advice import build_pirl_advice, shaped_share, unshaped_warning
 from pirl.agents.train import train
 from pirl.config.run import RunConfig
-from pirl.evaluate.report import write_report
 from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin, spec_for_run
 from pirl.evaluate.summary import honest_label
+from pirl.report.document import write_report
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_CFG = ROOT / "configs" / "test.yaml"
@@ -123,7 +123,7 @@ def test_an_unparseable_probe_answer_is_one_warning_line(tmp_path):
 
 
 def test_the_summary_claims_only_what_the_intervals_show():
-    from pirl.evaluate.report import summary_lines
+    from pirl.report.document import summary_lines
 
     def cmp(other, n_pirl, n_other, lo, hi, fixed=False, size="30x30x3"):
         return {"pirl": "PIRL (x)", "other": other, "sim": "grid", "size": size,

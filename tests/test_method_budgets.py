@@ -14,7 +14,7 @@ import yaml
 from pirl.agents.runs import method_steps, train_one, train_run
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.evaluate.plan import check_reproduce, make_plan, plan_runs, steps_text
+from pirl.reproduce.plan import check_reproduce, make_plan, plan_runs, steps_text
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST = ROOT / "configs" / "test.yaml"

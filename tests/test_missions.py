@@ -239,7 +239,7 @@ def test_a_mission_flies_back_from_its_files_with_the_grid_episodes_coverage(
 
     # The flight is read from the file, not the episode: a plan cut after its first leg flies
     # only that leg (fewer steps, less coverage).
-    from pirl.evaluate.flyback import fly_files, read_flight
+    from pirl.missions.fly import fly_files, read_flight
 
     plan_file = out / "mission.plan"
     doc = json.loads(plan_file.read_text())
@@ -253,7 +253,7 @@ def test_a_mission_flies_back_from_its_files_with_the_grid_episodes_coverage(
 
 
 def test_sorties_fly_in_order_and_bad_folders_are_one_line(tmp_path: Path) -> None:
-    from pirl.evaluate.flyback import read_flight
+    from pirl.missions.fly import read_flight
 
     preset = tmp_path / "short.yaml"
     preset.write_text("mission:\n  battery_s: 60\n  reserve: 0.1\n")
@@ -286,8 +286,8 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
     import numpy as np
 
     from pirl.config.run import RunConfig
-    from pirl.evaluate.mission_report import reproduction_missions
-    from pirl.evaluate.tables import render_markdown
+    from pirl.report.missions import reproduction_missions
+    from pirl.report.tables import render_markdown
     from test_sites import write_site
 
     h = np.zeros((10, 12))

@@ -10,10 +10,10 @@ from pirl.advice.oracle import OracleAdvisor
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.env import make_vec_env
-from pirl.env.vector import VCPPVectorEnv
+from pirl.env.gym_vector import VCPPVectorEnv
 from pirl.pare.bundle import AdviceBundle
-from pirl.pare.vec_env import PAREVecEnv
-from pirl.pare.vector import PAREVectorWrapper
+from pirl.pare.gym_vector import PAREVectorWrapper
+from pirl.pare.sb3_vec import PAREVecEnv
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
 

@@ -16,7 +16,7 @@ from pirl.env import make_vec_env
 from pirl.env.rewards import LLM_INDEX
 from pirl.pare import alignment, f_llm
 from pirl.pare.bundle import AdviceBundle
-from pirl.pare.vec_env import PAREVecEnv
+from pirl.pare.sb3_vec import PAREVecEnv
 
 SETTINGS = {"size": (12, 10, 3), "reward": "ewri", "llm_weight": True, "wind_prob": 0.2}
 

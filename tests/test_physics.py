@@ -23,7 +23,7 @@ from pirl.env.vcpp_env import VCPPEnv
 from pirl.evaluate.rollout import run_episode
 from pirl.physics import Mission, Pose, run_physics_episode
 from pirl.physics.coverage import view_angles
-from pirl.physics.mission import CAMERA, ENERGY_CAUSES, MOVE, REFUSED, normalized_power, touching
+from pirl.physics.flight import CAMERA, ENERGY_CAUSES, MOVE, REFUSED, normalized_power, touching
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.physics.webots.controller import mission_from_args, parse_args
 from pirl.physics.webots.pilot import MavicPilot
@@ -395,8 +395,8 @@ def test_runner_evaluates_the_physics_simulator() -> None:
 
 
 def test_report_puts_physics_beside_grid_and_explains_a_gap_by_counted_events() -> None:
-    from pirl.evaluate.physics_report import physics_gap_table
     from pirl.evaluate.runner import run_chunk, spec_for_builtin
+    from pirl.report.physics import physics_gap_table
 
     spec = spec_for_builtin("boustrophedon")
     env = VCPPConfig(max_steps=5, scale_by_alpha=False).to_dict()

@@ -18,8 +18,9 @@ import pytest
 from pirl.config.run import RunConfig
 from pirl.evaluate import plan as plan_module
 from pirl.evaluate import reproduce as reproduce_module
-from pirl.evaluate.distributed import TEACHER, ExecutorChoice, TrainJob
-from pirl.evaluate.plan import Plan, check_reproduce, executor_for, make_plan, run_plan
+from pirl.evaluate.executors import ExecutorChoice
+from pirl.reproduce.jobs import TEACHER, TrainJob
+from pirl.reproduce.plan import Plan, check_reproduce, executor_for, make_plan, run_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST = ROOT / "configs" / "test.yaml"

@@ -96,7 +96,7 @@ def test_methods_derive_folders_order_and_checks():
 
 
 def test_a_bad_advisor_in_a_profile_is_refused_before_training(tmp_path):
-    from pirl.evaluate.reproduce import check_reproduce
+    from pirl.reproduce.pipeline import check_reproduce
 
     cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(
         reproduce={"pirl_variants": [{"advisor": "gpt9"}]}

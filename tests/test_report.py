@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pirl.evaluate.report import write_report
-from pirl.evaluate.tables import Span, Table, render_markdown
+from pirl.report.document import write_report
+from pirl.report.tables import Span, Table, render_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 EVIL = "PPO-SR <script>alert(1)</script> & co"

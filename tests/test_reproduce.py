@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from pirl.config.run import RunConfig
-from pirl.evaluate.reproduce import reproduce
+from pirl.reproduce.pipeline import reproduce
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -117,7 +117,7 @@ def _probabilities(run: Path):
     import numpy as np
 
     from pirl.agents.loading import load_policy
-    from pirl.env.vec_env import make_vec_env
+    from pirl.env.sb3_vec import make_vec_env
 
     cfg = RunConfig.from_yaml(run / "config.yaml")
     obs = make_vec_env(8, seed=123, config=cfg.env).reset()
@@ -127,7 +127,7 @@ def _probabilities(run: Path):
 def test_parallel_training_gives_the_same_models_as_sequential(tmp_path):
     import numpy as np
 
-    from pirl.evaluate.reproduce import train_all
+    from pirl.reproduce.pipeline import train_all
 
     cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
         reproduce={"methods": ["ppo-sr", "ppo-ewri", "il"], "seeds": [0]}

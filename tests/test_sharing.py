@@ -422,8 +422,8 @@ def test_config_files_that_are_not_utf8_or_repeat_a_key(tmp_path):
 
 
 def test_a_damaged_advisor_stats_is_named_and_the_report_still_says_so(tmp_path):
-    from pirl.evaluate.report import advice_table
-    from pirl.evaluate.reproduce import _advisor_stats
+    from pirl.report.document import advice_table
+    from pirl.reproduce.pipeline import _advisor_stats
 
     run = tmp_path / "pirl-s0"
     run.mkdir()

@@ -226,9 +226,9 @@ def test_evaluate_site_planner_covers_seeable_cells(tmp_path: Path) -> None:
 
 
 def test_report_tables_take_a_site_beside_a_size(tmp_path: Path) -> None:
-    from pirl.evaluate.physics_report import physics_gap_table
-    from pirl.evaluate.report import camera_table, improvements, paper_tables
     from pirl.evaluate.summary import read_summary
+    from pirl.report.document import camera_table, improvements, paper_tables
+    from pirl.report.physics import physics_gap_table
 
     out = tmp_path / "eval"
     proc = pirl(
@@ -344,7 +344,7 @@ def test_boxes_cover_exactly_the_voxels() -> None:
 
 def test_pyflyt_flies_a_site_among_its_buildings(tmp_path: Path) -> None:
     from pirl.agents.loading import load_policy
-    from pirl.physics.mission import Mission
+    from pirl.physics.flight import Mission
     from pirl.physics.pyflyt_backend import run_physics_episode
 
     h = np.zeros((8, 8))
@@ -361,7 +361,7 @@ def test_pyflyt_flies_a_site_among_its_buildings(tmp_path: Path) -> None:
 
 def test_a_profile_that_trains_on_a_site_checks_its_sizes_as_generated_worlds() -> None:
     from pirl.config.run import RunConfig
-    from pirl.evaluate.plan import check_reproduce
+    from pirl.reproduce.plan import check_reproduce
 
     cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml")
     site = with_site(cfg.env, str(EXAMPLES / "campus"))

@@ -8,8 +8,8 @@ from pathlib import Path
 
 from pirl.agents.teacher_phase import phase_of
 from pirl.config.run import RunConfig
-from pirl.evaluate.plan import check_reproduce, make_plan, plan_runs, teacher_phases
-from pirl.evaluate.reproduce import train_all
+from pirl.reproduce.pipeline import train_all
+from pirl.reproduce.plan import check_reproduce, make_plan, plan_runs, teacher_phases
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -306,8 +306,8 @@ def reproduce(
     from pirl.agents.run_folder import folder_lock
     from pirl.agents.stops import TrainingInterrupted
     from pirl.config.run import RunConfig
-    from pirl.evaluate.plan import check_reproduce, make_plan
-    from pirl.evaluate.reproduce import run_reproduction
+    from pirl.reproduce.pipeline import run_reproduction
+    from pirl.reproduce.plan import check_reproduce, make_plan
 
     path = _preset(config, "--config") if config else _preset(profile)
     cfg = RunConfig.from_yaml(path)
@@ -802,7 +802,7 @@ def plan(
 ) -> None:
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
-    from pirl.evaluate.missions import mission_source, write_mission
+    from pirl.missions.write import mission_source, write_mission
 
     check_seed(seed)
     if fly not in (None, "physics"):
@@ -823,7 +823,7 @@ def plan(
 
 
 def _fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
-    from pirl.evaluate.flyback import fly_mission, read_flight
+    from pirl.missions.fly import fly_mission, read_flight
 
     files = read_flight(folder)
     console.print(

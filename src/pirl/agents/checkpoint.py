@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # SB3 brings torch: reading a run folder needs neither
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from pirl.env.vec_env import VCPPVecEnv
+    from pirl.env.sb3_vec import VCPPVecEnv
 
 
 def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:

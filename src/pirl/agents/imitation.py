@@ -29,7 +29,7 @@ from pirl.agents.run_folder import (
 )
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
-from pirl.env.vec_env import make_vec_env
+from pirl.env.sb3_vec import make_vec_env
 
 TABNET_FILE = "tabnet.zip"
 

@@ -1,7 +1,7 @@
 """Training runs by name: ``pirl train``'s one run, and one run of a reproduction's plan.
 
 ``pirl train`` calls :func:`train_run`; ``pirl reproduce`` calls :func:`train_one` for each run
-in turn, and a Ray worker calls the same function (:mod:`pirl.evaluate.distributed`), so all
+in turn, and a Ray worker calls the same function (:mod:`pirl.evaluate.executors`), so all
 of them train with the same arguments. Both choose the trainer from the method's entry
 (:mod:`pirl.agents.methods`). It lives with training, below evaluation, so neither of those
 two modules imports the other.

@@ -48,7 +48,7 @@ from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
-from pirl.env.vec_env import VCPPVecEnv, make_vec_env
+from pirl.env.sb3_vec import VCPPVecEnv, make_vec_env
 from pirl.pare.stats import AdvisorFailing
 from pirl.progress import Progress
 
@@ -163,7 +163,7 @@ def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str =
     pare = None
     inner = venv
     if advice is not None:
-        from pirl.pare.vec_env import PAREVecEnv
+        from pirl.pare.sb3_vec import PAREVecEnv
 
         pare = PAREVecEnv.from_settings(
             venv, cfg.pare, advice, refit_every=cfg.ppo.n_steps, seed=seed, source=source

@@ -14,9 +14,9 @@ __all__ = ["VCPPEnv", "VCPPVecEnv", "VCPPVectorEnv", "make_vec_env"]
 
 _LAZY = {
     "VCPPEnv": "pirl.env.vcpp_env",
-    "VCPPVecEnv": "pirl.env.vec_env",
-    "make_vec_env": "pirl.env.vec_env",
-    "VCPPVectorEnv": "pirl.env.vector",
+    "VCPPVecEnv": "pirl.env.sb3_vec",
+    "make_vec_env": "pirl.env.sb3_vec",
+    "VCPPVectorEnv": "pirl.env.gym_vector",
 }
 
 

@@ -1,7 +1,7 @@
 """The public hooks a reward-shaping wrapper (PARE) uses on a batched VCPP environment.
 
-Both batched environments (the Stable-Baselines3 :class:`~pirl.env.vec_env.VCPPVecEnv` and the
-Gymnasium :class:`~pirl.env.vector.VCPPVectorEnv`) offer them, so a wrapper reads poses and
+Both batched environments (the Stable-Baselines3 :class:`~pirl.env.sb3_vec.VCPPVecEnv` and the
+Gymnasium :class:`~pirl.env.gym_vector.VCPPVectorEnv`) offer them, so a wrapper reads poses and
 world views and adds its reward term through these methods only, never through the world
 arrays, and works over either.
 """

@@ -293,7 +293,7 @@ def evaluate(
     if ray_address and executor_factory is None:
         import functools
 
-        from pirl.evaluate.distributed import ray_executor
+        from pirl.evaluate.executors import ray_executor
 
         executor_factory = functools.partial(ray_executor, ray_address)
     for sim in plan.sims:

@@ -1,5 +1,5 @@
 """PARE's engine: one advice source, the advice board and the pure core, driven by an
-environment adapter (:mod:`pirl.pare.vec_env` for Stable-Baselines3, :mod:`pirl.pare.vector`
+environment adapter (:mod:`pirl.pare.sb3_vec` for Stable-Baselines3, :mod:`pirl.pare.gym_vector`
 for Gymnasium) through the environment's public shaping hooks.
 
 The advice about state ``s_t`` shapes the reward ``r_{t+1}``: after the action, the move

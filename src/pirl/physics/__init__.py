@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pirl.physics.mission import Mission, Pose, StepPlan
+from pirl.physics.flight import Mission, Pose, StepPlan
 
 __all__ = ["Mission", "Pose", "StepPlan", "run_physics_episode"]
 

@@ -1,6 +1,6 @@
 """The PyFlyt backend: a QuadX quadrotor in PyBullet flies the policy's waypoints.
 
-:func:`run_physics_episode` plays one scenario seed: a :class:`~pirl.physics.mission.Mission`
+:func:`run_physics_episode` plays one scenario seed: a :class:`~pirl.physics.flight.Mission`
 turns each action into a waypoint or a camera change, and :class:`PyFlytFlight` flies it in a
 headless PyFlyt ``Aviary`` (PyBullet): QuadX in PyFlyt's position mode (mode 7: x, y, yaw,
 z), sphere obstacles as static collision bodies, the seeded :class:`~pirl.physics.wind.GustWind`
@@ -30,7 +30,7 @@ import numpy as np
 from pirl.agents.policy import Policy
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
-from pirl.physics.mission import Mission, Pose, normalized_power
+from pirl.physics.flight import Mission, Pose, normalized_power
 from pirl.world.metrics import PathTail
 
 # PyBullet calls made every physics step. BulletClient resolves them through __getattr__ with

@@ -2,7 +2,7 @@
 
 For users who have Webots; not exercised in CI (Webots cannot be installed there). The glue is
 thin on purpose: waypoints from the policy's actions, coverage from the pose, battery and
-metrics are :class:`~pirl.physics.mission.Mission`, the code the PyFlyt backend runs and the
+metrics are :class:`~pirl.physics.flight.Mission`, the code the PyFlyt backend runs and the
 tests check; the flight law is :class:`~pirl.physics.webots.pilot.MavicPilot` (tested without
 Webots). What is Webots-only is reading the devices and writing the motors:
 
@@ -30,7 +30,7 @@ import numpy as np
 
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
-from pirl.physics.mission import Mission, Pose, normalized_power, touching
+from pirl.physics.flight import Mission, Pose, normalized_power, touching
 from pirl.physics.webots.pilot import MavicPilot
 
 PROPELLERS = (

@@ -5,7 +5,7 @@ and, next to it, the controller that flies a PIRL policy in it
 (``project/controllers/pirl_mavic/pirl_mavic.py``, a shim around
 :mod:`pirl.physics.webots.controller`). The obstacles and the start are those of
 ``VCPPEnv.reset(seed=seed)``, placed with the same metric layout as the PyFlyt backend
-(:class:`~pirl.physics.mission.Mission`), so the three simulators fly the same scenario.
+(:class:`~pirl.physics.flight.Mission`), so the three simulators fly the same scenario.
 
 Needs no Webots to run (text only); the world targets Webots R2023b (ENU coordinates).
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
-from pirl.physics.mission import Mission
+from pirl.physics.flight import Mission
 
 WEBOTS_VERSION = "R2023b"
 CONTROLLER = "pirl_mavic"

@@ -5,7 +5,7 @@ folder is made); :func:`make_plan` builds on the checked profile a :class:`Plan`
 training still to do with what each job waits for (an imitation run its expert's run, a PIRL
 run its teacher's phase), the evaluation tasks and the time estimates. :meth:`Plan.describe`
 and :meth:`Plan.status_lines` print it; :func:`run_plan` trains its jobs in this process, in a
-pool of processes or on Ray (:class:`~pirl.evaluate.distributed.ExecutorChoice`), with one
+pool of processes or on Ray (:class:`~pirl.evaluate.executors.ExecutorChoice`), with one
 dependency order for all three.
 """
 
@@ -28,15 +28,10 @@ from pirl.agents.runs import check_budgets, check_layouts, method_steps
 from pirl.agents.teacher_phase import TeacherPhase, phase_of
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
-from pirl.evaluate.distributed import (
-    TEACHER,
-    ExecutorChoice,
-    TrainJob,
-    open_executor,
-    train_job,
-)
+from pirl.evaluate.executors import ExecutorChoice, open_executor
 from pirl.evaluate.runner import EvalPlan, MethodSpec, check_workers, spec_for_builtin, spec_for_run
 from pirl.evaluate.scenarios import parse_size
+from pirl.reproduce.jobs import TEACHER, TrainJob, train_job
 
 Log = Callable[[str], None]
 Size = tuple[int, int, int]

@@ -22,7 +22,7 @@ import numpy as np
 
 from pirl.agents.methods import PLANNER
 from pirl.config.run import RunConfig
-from pirl.evaluate.tables import Cell, Span, Table
+from pirl.report.tables import Cell, Span, Table
 
 SCENARIO_SEED = 0
 """The scenario (the site's start draw) every reproduction mission is written from."""
@@ -56,8 +56,8 @@ def _mission(
     method: str | None = None,
 ) -> dict[str, Any]:
     """Write (unless already written and flown) and fly one mission; its summary and flight."""
-    from pirl.evaluate.flyback import fly_mission
-    from pirl.evaluate.missions import mission_source, write_mission
+    from pirl.missions.fly import fly_mission
+    from pirl.missions.write import mission_source, write_mission
 
     done = folder / "flown.json"
     if (folder / "summary.json").is_file() and done.is_file():
@@ -171,7 +171,7 @@ def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pirl.evaluate.flyback import read_flight
+    from pirl.missions.fly import read_flight
     from pirl.world.site import load_site
 
     n = sum(len(e) for _, _, e in rows)

@@ -1,4 +1,4 @@
-"""PARE as a Gymnasium ``VectorWrapper`` around :class:`~pirl.env.vector.VCPPVectorEnv`.
+"""PARE as a Gymnasium ``VectorWrapper`` around :class:`~pirl.env.gym_vector.VCPPVectorEnv`.
 
 The vector env resets an ended world on the step after its end (``AutoresetMode.NEXT_STEP``):
 that step is no transition, so PARE neither shapes nor counts it, and no advice is asked
@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium.vector import VectorWrapper
 
 from pirl.config.errors import ConfigError
-from pirl.env.vector import VCPPVectorEnv
+from pirl.env.gym_vector import VCPPVectorEnv
 from pirl.pare.core import STATUSES, Shaped
 from pirl.pare.engine import PARE
 from pirl.pare.stats import PareStats

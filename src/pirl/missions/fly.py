@@ -4,10 +4,10 @@ in the PyFlyt backend, with wind.
 Nothing of the episode the mission was written from is used: the ``.plan`` files (one per
 sortie, in order) are read from disk, every waypoint's latitude, longitude and altitude is
 turned back into a grid cell through the same geo-reference the writer used, every gimbal and
-zoom command into a camera setting (the inverse functions of :mod:`pirl.evaluate.missions`),
+zoom command into a camera setting (the inverse functions of :mod:`pirl.missions.write`),
 and a :class:`FileFollower` flies them as the grid's own actions: one-cell moves towards the
 next waypoint from wherever the wind left the drone, camera steps towards the next setting.
-The :class:`~pirl.physics.mission.Mission` books coverage and energy with the same rules as
+The :class:`~pirl.physics.flight.Mission` books coverage and energy with the same rules as
 every physics episode. What is flown and what is not: docs/missions.md.
 """
 
@@ -29,7 +29,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
-from pirl.evaluate.missions import (
+from pirl.missions.write import (
     Geo,
     geo_for,
     mav,
@@ -239,7 +239,7 @@ def fly_files(
     """Fly a mission read back by :func:`read_flight` in PyFlyt; the flown figures beside the
     grid episode's, and under ``"covered"`` the (X, Y) map of ground cells the flight saw.
     ``log`` gets one line per ``every_s`` wall seconds (a site's flight takes minutes)."""
-    from pirl.physics.mission import Mission, scenario_for_seed
+    from pirl.physics.flight import Mission, scenario_for_seed
     from pirl.physics.pyflyt_backend import PyFlytFlight
 
     physics = physics or PhysicsConfig()

@@ -1,7 +1,7 @@
 """The batched VCPP environment as a Gymnasium vector env (``gym.make_vec("pirl/VCPP-v0")``).
 
 The same :class:`~pirl.env.core.EnvCore` as the single env and the Stable-Baselines3 adapter
-(:class:`pirl.env.vec_env.VCPPVecEnv`): one compiled kernel steps every world, weighs its
+(:class:`pirl.env.sb3_vec.VCPPVecEnv`): one compiled kernel steps every world, weighs its
 reward and writes its observation into a preallocated buffer.
 """
 

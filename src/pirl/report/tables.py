@@ -2,7 +2,7 @@
 rendered to Markdown here (:func:`render_markdown`, ``table.md``) and to HTML by the report's
 Jinja2 template (``templates/report.html.j2``); neither output is parsed back from the other.
 
-A module of its own (not part of :mod:`pirl.evaluate.report`) because the modules that build
+A module of its own (not part of :mod:`pirl.report.document`) because the modules that build
 a table for the report (the physics, mission and advice-curve tables) are imported by it.
 """
 

@@ -3,7 +3,7 @@
 Inputs are what evaluation and training wrote (``summary.csv``, ``episodes.jsonl``, run
 folders); outputs land in the report folder: ``table.md``, ``figure.png``,
 ``intervals_<act>.png``, ``learning_curves.png`` and ``report.html`` (self-contained: every
-image embedded). Each table is built once as rows (:class:`pirl.evaluate.tables.Table`);
+image embedded). Each table is built once as rows (:class:`pirl.report.tables.Table`);
 ``table.md`` is rendered from the rows and ``report.html`` from the Jinja2 template
 ``templates/report.html.j2``.
 """
@@ -24,10 +24,10 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select
 
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, is_planner, report_order
 from pirl.agents.run_folder import RunFolder
-from pirl.evaluate.physics_report import physics_gap_table
 from pirl.evaluate.summary import honest_label, read_summary, size_key
-from pirl.evaluate.tables import Cell, Span, Table, render_markdown
 from pirl.pare.stats import RunStats
+from pirl.report.physics import physics_gap_table
+from pirl.report.tables import Cell, Span, Table, render_markdown
 
 # The paper's results (its tables): VCR BE RVC at 30x30x3, 45x45x3, 60x60x3.
 _PAPER_TEXT = """
@@ -552,7 +552,7 @@ def result_tables(
 @functools.cache
 def _page_template() -> Template:
     env = Environment(
-        loader=PackageLoader("pirl.evaluate", "templates"),
+        loader=PackageLoader("pirl.report", "templates"),
         # The default extensions (html, htm, xml) miss a ``.html.j2`` name: escaping off.
         autoescape=select_autoescape(("html.j2",)),
         undefined=StrictUndefined,

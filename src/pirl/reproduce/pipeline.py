@@ -21,17 +21,6 @@ from pirl.agents.methods import ADVISED, asks, method
 from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
-from pirl.evaluate.plan import (
-    Log,
-    Plan,
-    check_reproduce,
-    executor_for,
-    make_plan,
-    pirl_variants,
-    run_plan,
-    steps_text,
-    variant_name,
-)
 from pirl.evaluate.runner import (
     MethodSpec,
     distinct_specs,
@@ -42,6 +31,17 @@ from pirl.evaluate.runner import (
 )
 from pirl.evaluate.scenarios import scenario_seeds
 from pirl.evaluate.summary import honest_label
+from pirl.reproduce.plan import (
+    Log,
+    Plan,
+    check_reproduce,
+    executor_for,
+    make_plan,
+    pirl_variants,
+    run_plan,
+    steps_text,
+    variant_name,
+)
 
 GIF_SIZE = (30, 30, 3)
 
@@ -59,7 +59,7 @@ def train_all(
 
     With ``workers`` > 1 the runs train in that many spawned processes at once, each with one
     torch and one numba thread; with ``ray_address`` they go to Ray instead. A run trains the
-    same model whichever way (:func:`~pirl.evaluate.plan.run_plan`).
+    same model whichever way (:func:`~pirl.reproduce.plan.run_plan`).
     """
     plan = make_plan(check_reproduce(cfg, advisor, workers), Path(out))
     for line in plan.status_lines():
@@ -150,7 +150,7 @@ def run_reproduction(
     """Print ``plan``, train its jobs (with Ray at ``ray_address``, else its workers), evaluate
     every run and the built-ins, write the report. Returns the path of ``report.html``."""
     from pirl.agents.run_folder import git_commit
-    from pirl.evaluate.report import write_report
+    from pirl.report.document import write_report
 
     cfg, out, advisor, rp = plan.cfg, plan.out, plan.advisor, plan.cfg.reproduce
     for line in plan.describe() + plan.status_lines():
@@ -188,7 +188,7 @@ def run_reproduction(
             ("PIRL by advice quality", *advice_quality(cfg, out, advisor, runs, stats, log))
         )
     if rp.missions:
-        from pirl.evaluate.mission_report import reproduction_missions
+        from pirl.report.missions import reproduction_missions
 
         records = [json.loads(line) for line in (out / "eval" / "episodes.jsonl").open()]
         missions = reproduction_missions(cfg, out, evaluation.sites, records, log)
@@ -221,8 +221,8 @@ def advice_quality(
     the markdown section with the break-even. Returns (section, figure)."""
     from pirl.advice.factory import make_advisor
     from pirl.agents.pirl_advice import shaped_share
-    from pirl.evaluate.advice_curve import CurveAdvisor, curve_points, plot, section
     from pirl.evaluate.advice_score import score_advisor
+    from pirl.report.advice_curve import CurveAdvisor, curve_points, plot, section
 
     rp = cfg.reproduce
     folder = out / "report" / "scores"

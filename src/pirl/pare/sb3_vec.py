@@ -1,4 +1,4 @@
-"""PARE as a Stable-Baselines3 ``VecEnvWrapper`` around :class:`~pirl.env.vec_env.VCPPVecEnv`.
+"""PARE as a Stable-Baselines3 ``VecEnvWrapper`` around :class:`~pirl.env.sb3_vec.VCPPVecEnv`.
 
 Per step, ``info["pare"]`` holds ``f_llm``, ``dir_align``, ``pos_align``, ``move``, ``cam``,
 ``status`` (fresh, cached, stale, student or missing) and ``staleness`` (steps); the LLM term
@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
-from pirl.env.vec_env import VCPPVecEnv
+from pirl.env.sb3_vec import VCPPVecEnv
 from pirl.pare.core import STATUSES, Shaped
 from pirl.pare.engine import PARE
 from pirl.pare.stats import PareStats

@@ -4,7 +4,7 @@ For every run (method and training seed) flown in the physics simulator, the gri
 the same scenarios (same method, run, size, act mode and scenario seeds) give the grid VCR;
 the physics episodes give the physics VCR and what happened in flight, counted: why the
 episodes ended (``end``), steps, timeouts, contacts, recoveries, and the battery by cause
-(the ``energy_<cause>`` fields of :mod:`pirl.physics.mission`). A gap above
+(the ``energy_<cause>`` fields of :mod:`pirl.physics.flight`). A gap above
 :data:`GAP_EXPLAINED` gets a sentence built from those counts.
 """
 
@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from pirl.evaluate.tables import Table
-from pirl.physics.mission import ENERGY_CAUSES
+from pirl.physics.flight import ENERGY_CAUSES
+from pirl.report.tables import Table
 
 GAP_EXPLAINED = 0.1
 """|grid VCR - physics VCR| above which the table says why, from counted events."""

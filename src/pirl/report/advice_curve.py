@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.evaluate.summary import interval_estimates, probability_of_improvement, seed_scores
-from pirl.evaluate.tables import Table
+from pirl.report.tables import Table
 
 
 @dataclass(frozen=True)

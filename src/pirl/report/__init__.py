@@ -1,0 +1,1 @@
+"""The reproduction report: tables, figures and sections, written as Markdown and HTML."""

@@ -1,0 +1,2 @@
+"""The reproduction (``pirl reproduce``): its plan, its training jobs and the sequence that
+trains, evaluates, flies and reports."""
