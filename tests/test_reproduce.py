@@ -86,7 +86,7 @@ def test_report_renders_in_headless_chromium(reproduced, tmp_path):
 
 
 def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced, monkeypatch):
-    from pirl.evaluate import plan
+    from pirl.reproduce import plan
 
     cfg, out, report, _ = reproduced
     before = (out / "eval" / "summary.csv").read_text()

@@ -266,14 +266,35 @@ class TeacherDataset:
         cur = self._connection().execute("DELETE FROM samples WHERE teacher = ?", (teacher,))
         return int(cur.rowcount)
 
-    def count(self, teacher: str) -> int:
-        """Rows stored for ``teacher``."""
-        row = (
-            self._connection()
-            .execute("SELECT COUNT(*) FROM samples WHERE teacher = ?", (teacher,))
-            .fetchone()
-        )
+    def count(self, teacher: str, source_prefix: str = "") -> int:
+        """Rows stored for ``teacher`` (only those whose source starts with
+        ``source_prefix``, when given)."""
+        query, args = "SELECT COUNT(*) FROM samples WHERE teacher = ?", [teacher]
+        if source_prefix:
+            query += " AND substr(source, 1, ?) = ?"
+            args += [len(source_prefix), source_prefix]
+        row = self._connection().execute(query, args).fetchone()
         return int(row[0])
+
+    def copy_first(self, teacher: str, source_prefix: str, limit: int, to: str, source: str) -> int:
+        """Copy the first ``limit`` rows of ``teacher`` whose source starts with
+        ``source_prefix`` (in the order they were stored) under the key ``to``, as rows of
+        ``source`` at step 0; returns how many. A run's head start: fixed answers taken once,
+        before the run trains, so nothing another process stores later reaches it."""
+        conn = self._connection()
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            cur = conn.execute(
+                "INSERT INTO samples (teacher, features, labels, source, t, created) "
+                "SELECT ?, features, labels, ?, 0, created FROM samples "
+                "WHERE teacher = ? AND substr(source, 1, ?) = ? ORDER BY id LIMIT ?",
+                (to, source, teacher, len(source_prefix), source_prefix, int(limit)),
+            )
+            conn.execute("COMMIT")
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        return int(cur.rowcount)
 
     def close(self) -> None:
         if self._conn is not None and self._pid == os.getpid():

@@ -18,6 +18,9 @@ from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.pare.bundle import AdviceBundle
 
+RUN_KEY = ":run:"
+"""Joins a teacher's dataset key and a run's own suffix (``pare.student_dataset_scope: run``)."""
+
 
 def _num(value: float) -> str:
     return f"{value:g}"
@@ -174,7 +177,7 @@ def make_student(
     if cfg.pare.student_dataset_scope == "run":
         if not run:
             raise UserError("pare.student_dataset_scope: run needs a run folder (pirl train)")
-        key += ":run:" + hashlib.sha256(run.encode()).hexdigest()[:12]
+        key += RUN_KEY + hashlib.sha256(run.encode()).hexdigest()[:12]
     if student_path is not None:
         path = Path(student_path)
         file = path / STUDENT_FILE if path.is_dir() else path

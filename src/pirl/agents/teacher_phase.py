@@ -19,7 +19,9 @@ from typing import Any
 
 from pirl.advice.registry import advisor_kind
 from pirl.agents.methods import PLANNER
+from pirl.agents.pirl_advice import RUN_KEY, build_pirl_advice, dataset_path
 from pirl.config.run import RunConfig
+from pirl.pare.bundle import AdviceBundle
 
 POLICY = PLANNER.name
 """The reference policy whose states the teacher answers: the planner covers the world
@@ -27,6 +29,8 @@ systematically, so its states span positions, coverage and battery levels."""
 SEED = 7
 """Scenario stream of the phase (2,000,000 + 700,000 onwards: apart from training,
 evaluation and ``pirl distill``'s default)."""
+SOURCE = "teacher-phase:"
+"""The dataset source of every answer a phase stores (followed by the phase's name)."""
 
 
 @dataclass(frozen=True)
@@ -69,22 +73,38 @@ def run_teacher_phase(
     batch_size: int = 16,
 ) -> dict[str, Any]:
     """Ask the phase's teacher about planner states until the shared dataset holds
-    ``phase.answers`` answers under the key the PIRL runs will use (answers already there,
-    from an earlier reproduction or run, count). Returns what it did."""
+    ``phase.answers`` phase answers under the key the PIRL runs will use (a phase's answers
+    already there, from an earlier reproduction, count; a run's own answers do not). Returns
+    what it did.
+
+    One phase at a time per dataset (a file lock beside it): two processes that both need
+    the head start store one phase's answers, in one order, so the first ``phase.answers``
+    rows every run copies are the same whoever asked first."""
+    from filelock import FileLock
+
+    lock = dataset_path(cfg).with_suffix(".phase.lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with FileLock(str(lock)):
+        return _run_phase(cfg, phase, log, batch_size)
+
+
+def _run_phase(
+    cfg: RunConfig, phase: TeacherPhase, log: Callable[[str], Any], batch_size: int
+) -> dict[str, Any]:
     from pirl.advice.student import encode
     from pirl.agents.distill import collect_states
-    from pirl.agents.pirl_advice import build_pirl_advice
 
     # The phase runs in a worker process of its own: no child process for the model.
     run_cfg = cfg.with_overrides(
-        pare={**dict(phase.pare), "mode": "student"}, advisor={"local_process": False}
+        pare={**dict(phase.pare), "mode": "student", "student_dataset_scope": "shared"},
+        advisor={"local_process": False},
     )
     started = time.perf_counter()
     advice = build_pirl_advice(run_cfg, probe=True, seed=SEED, log=log)
     advisor, student, dataset = advice.advisor, advice.student, advice.dataset
     assert student is not None and dataset is not None
     key = student.teacher
-    have = dataset.count(key)
+    have = dataset.count(key, SOURCE)
     asked = ok = 0
     try:
         if have < phase.answers:
@@ -99,7 +119,7 @@ def run_teacher_phase(
                 good = [i for i, a in enumerate(answers) if a.recommendation is not None]
                 if good:
                     labels = encode([answers[i].recommendation for i in good])
-                    dataset.add(key, feats[lo:hi][good], labels, f"teacher-phase:{phase.name}")
+                    dataset.add(key, feats[lo:hi][good], labels, SOURCE + phase.name)
                 asked, ok = hi, ok + len(good)
     finally:
         advisor.close()
@@ -114,4 +134,29 @@ def run_teacher_phase(
     }
 
 
-__all__ = ["POLICY", "TeacherPhase", "needs_head_start", "phase_of", "run_teacher_phase"]
+def take_head_start(
+    cfg: RunConfig, advice: AdviceBundle, source: str, log: Callable[[str], Any] = print
+) -> int:
+    """Give a new run of ``pare.student_dataset_scope: run`` its head start: the first
+    ``reproduce.teacher_phase_answers`` answers of its teacher's phase, copied under the run's
+    own key before it trains (the phase is run here first when its answers are missing, as
+    under ``pirl train`` alone). Returns the rows copied; 0 when the run needs no phase."""
+    phase = phase_of(cfg, {})
+    if phase is None or advice.student is None or advice.dataset is None:
+        return 0
+    dataset, base = advice.dataset, advice.student.teacher.split(RUN_KEY)[0]
+    if dataset.count(base, SOURCE) < phase.answers:
+        log(f"{phase.name}: the teacher answers planner states first (head start)")
+        run_teacher_phase(cfg, phase, log)
+    return dataset.copy_first(base, SOURCE, phase.answers, advice.student.teacher, source)
+
+
+__all__ = [
+    "POLICY",
+    "SOURCE",
+    "TeacherPhase",
+    "needs_head_start",
+    "phase_of",
+    "run_teacher_phase",
+    "take_head_start",
+]

@@ -387,7 +387,11 @@ def train(
     # 2. the run folder: new (config.yaml and meta.json record the run) or resumed.
     found = prepare_run_folder(run.path, resume, log)
     if found is None and advice is not None and cfg.pare.student_dataset_scope == "run":
+        from pirl.agents.teacher_phase import take_head_start
+
         advice.drop_own_answers()  # an earlier run of this folder must not teach this one
+        # Its head start: the teacher phase's first answers, fixed before this run trains.
+        take_head_start(cfg, advice, str(run.path.resolve()), log)
     meta = {
         "method": method,
         "label": advice.label if advice is not None else entry.label,

@@ -189,15 +189,19 @@ class PareSettings(Settings, section="pare"):
     """Student mode: width of the student's two hidden layers."""
     student_dataset: str = ""
     """Teacher answers with their states; empty = student.sqlite beside the answer cache."""
-    student_dataset_scope: str = "shared"
-    """Student mode: 'shared': every run of the same teacher and settings learns from every
-    answer stored so far (a later seed starts with an earlier seed's answers, a rerun with the
-    last one's); 'run': each run learns only from the answers it asked for itself (a fresh
-    start drops what an earlier run of its folder stored), so seeds replicate independently
-    (studies)."""
-    student_wait_teacher: bool = False
-    """Student mode: wait for the teacher's batch at each rollout boundary (reproducible runs;
-    PPO then waits for a slow teacher)."""
+    student_dataset_scope: str = "run"
+    """Student mode: 'run': each run learns only from the answers it asked for itself, after
+    a head start copied once before it trains (the first ``reproduce.teacher_phase_answers``
+    answers of its teacher's phase, for an LLM teacher), so a seed's model never depends on
+    what another seed stores while it trains; a fresh start drops what an earlier run of its
+    folder stored. 'shared': every run of the same teacher and settings learns from every
+    answer stored so far, its neighbours' included (faster to shape, not reproducible when
+    seeds train side by side)."""
+    student_wait_teacher: bool = True
+    """Student mode: at each rollout boundary, wait for the teacher's batch sent at the
+    previous one, so the student's data arrive at steps fixed by the run, not by the
+    machine's load (reproducible). False: never wait (PPO runs ahead of a slow teacher; the
+    answers arrive at steps that depend on load)."""
     max_failure_rate: float = 0.5
     """Stop training when more than this share of the last failure_window teacher answers
     failed or did not parse (0 = never stop)."""
