@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 from pirl.config.run import RunConfig
-from pirl.reproduce import plan as plan_module
-from pirl.reproduce import pipeline as reproduce_module
 from pirl.evaluate.executors import ExecutorChoice
+from pirl.reproduce import pipeline as reproduce_module
+from pirl.reproduce import plan as plan_module
 from pirl.reproduce.jobs import TEACHER, TrainJob
 from pirl.reproduce.plan import Plan, check_reproduce, executor_for, make_plan, run_plan
 

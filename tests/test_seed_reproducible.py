@@ -9,10 +9,10 @@ late beside a busy process, give the same weights.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
-import json
 import time
 import zipfile
 from pathlib import Path

@@ -14,11 +14,12 @@ from rich.table import Table
 
 from pirl.advice.registry import DEFAULT_ADVISOR, advisor_kind, advisor_names
 from pirl.agents.methods import BUILTIN, PLAYED_ALONE, TRAINED
+from pirl.config.choices import Sim
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
+from pirl.config.presets import load_preset, preset_path
 
 if TYPE_CHECKING:
-    from pirl.config.run import RunConfig
     from pirl.config.world import VCPPConfig
 
 app = typer.Typer(
@@ -174,41 +175,9 @@ ADVISORS = _names(advisor_names())
 """The advisors --advisor takes: the built-ins and the installed plugins'."""
 
 
-def _run_config(config: str | Path | None) -> RunConfig:
-    """What every ``--config`` reads: a preset by name (quick, paper, test) or a YAML file,
-    all its sections; none: the defaults."""
-    from pirl.config.run import RunConfig
-
-    if not config:
-        return RunConfig()
-    path = _preset(config, "--config")
-    try:
-        return RunConfig.from_yaml(path)
-    except ConfigError:
-        _refuse_env_only(path)
-        raise
-
-
-def _refuse_env_only(path: Path) -> None:
-    """Say where the settings of an env-only file go (render and webots-world once read such
-    files): under ``env:``, as in every preset."""
-    import dataclasses
-
-    from pirl.config.load import read_yaml
-    from pirl.config.world import VCPPConfig
-
-    data = read_yaml(path)
-    env_keys = {f.name for f in dataclasses.fields(VCPPConfig)}
-    if isinstance(data, dict) and data and set(data) <= env_keys:
-        raise ConfigError(
-            f"--config {path}: {', '.join(map(str, data))} are env settings; a preset holds "
-            "them under 'env:' (see configs/quick.yaml)"
-        )
-
-
 def _env(config: str | None, size: tuple[int, int, int], footprint: str | None) -> VCPPConfig:
     """``--config``'s env section with ``--size`` and, when given, ``--footprint`` applied."""
-    env = _run_config(config).env.replace(size=tuple(size))
+    env = load_preset(config).env.replace(size=tuple(size))
     return env.replace(footprint=footprint) if footprint is not None else env
 
 
@@ -303,34 +272,21 @@ def reproduce(
     """Train every method not yet trained in --out, evaluate all of them, write the report."""
     from rich.progress import Progress
 
-    from pirl.agents.run_folder import folder_lock
     from pirl.agents.stops import TrainingInterrupted
-    from pirl.config.run import RunConfig
-    from pirl.reproduce.pipeline import run_reproduction
-    from pirl.reproduce.plan import check_reproduce, make_plan
+    from pirl.reproduce.pipeline import reproduce as run
 
-    path = _preset(config, "--config") if config else _preset(profile)
-    cfg = RunConfig.from_yaml(path)
+    path = preset_path(config, "--config") if config else preset_path(profile, "--profile")
+    cfg = load_preset(path)
     if seeds:
         cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
-    advisor = advisor or cfg.pare.advisor
-    checked = check_reproduce(cfg, advisor, workers)  # refused before any folder is made
     out = out or Path("results") / profile
-    console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
+    console.print(f"reproduce: profile {path}")
     try:
-        with (
-            folder_lock(out),
-            _StopWorkersOnCtrlC(),
-            Progress(console=console, transient=True) as bar,
-        ):
-            progress = _episode_progress(bar, "evaluation")
-            # The plan reads the run folders already in --out: made under the folder's lock.
-            report = run_reproduction(
-                make_plan(checked, out),
-                log=lambda m: console.print(m),
-                progress=progress,
-                ray_address=ray_address,
-            )
+        with _StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
+            report = run(
+                cfg, out, advisor or cfg.pare.advisor, workers, log=lambda m: console.print(m),
+                progress=_episode_progress(bar, "evaluation"), ray_address=ray_address,
+            )  # fmt: skip
     except (KeyboardInterrupt, TrainingInterrupted):
         raise _interrupted(
             f"finished runs and the last checkpoint of each run in progress are kept in {out}; "
@@ -346,23 +302,6 @@ def _command_line() -> str:
     import sys
 
     return "pirl " + shlex.join(sys.argv[1:])
-
-
-BUNDLED_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
-
-
-def _preset(profile: str | Path, option: str = "--profile") -> Path:
-    """A preset by name (quick, paper, test) or path: a file that exists, else
-    ``configs/<name>.yaml`` here, else the bundled one (whatever the working directory)."""
-    given = Path(profile)
-    if given.is_file():
-        return given
-    name = given.name if given.suffix in (".yaml", ".yml") else f"{given.name}.yaml"
-    for candidate in (Path("configs") / name, BUNDLED_CONFIGS / name):
-        if candidate.is_file() and (given.parent in (Path("."), Path("configs"))):
-            return candidate
-    known = ", ".join(sorted(p.stem for p in BUNDLED_CONFIGS.glob("*.yaml"))) or "quick, paper"
-    raise ConfigError(f"{option} {str(profile)!r}: no such file or bundled preset (try {known})")
 
 
 @app.command()
@@ -412,7 +351,7 @@ def train(
 
     try:
         result = train_run(
-            method, out, _preset(config, "--config") if config else None, _preset("quick"),
+            method, out, config, "quick",
             steps=steps, seed=seed, advisor=advisor, expert=expert, resume=resume,
             student=student, site=site,
         )  # fmt: skip
@@ -458,7 +397,7 @@ def distill(
     from pirl.advice.student import STUDENT_FILE
     from pirl.agents.distill import distill as run_distill
 
-    cfg = _run_config(config)
+    cfg = load_preset(config)
     advisor_kind(teacher).check_key(cfg)
     sources = policy or list(PLAYED_ALONE)
     with Progress(console=console, transient=True) as bar:
@@ -546,7 +485,7 @@ def evaluate(
                 out, list(runs or []), methods or [],
                 sizes if sizes is not None else ([] if site else ["30", "45", "60"]),
                 episodes, sim or ["grid"],
-                workers, _preset(config, "--config") if config is not None else None, advisor,
+                workers, preset_path(config) if config is not None else None, advisor,
                 act, overwrite, progress=_episode_progress(bar, "episodes"),
                 ray_address=ray_address, sites=list(site or []),
             )  # fmt: skip
@@ -634,7 +573,7 @@ def advise(
     check_seed(seed)
     kind = advisor_kind(advisor)
     if config:
-        cfg = _run_config(config)
+        cfg = load_preset(config)
     else:  # no config: the prompt this advisor suits (the embedded model: compact)
         cfg = RunConfig().with_overrides(pare={"prompt_variant": kind.prompt_variant})
     if base_url is None:
@@ -705,16 +644,13 @@ def _score(
     from rich.progress import Progress
 
     from pirl.advice.factory import make_advisor
-    from pirl.config.run import RunConfig
     from pirl.evaluate.advice_score import price_run, score_advisor
 
     if n < 1:
         raise ConfigError(f"--score {n}: ask about at least 1 state")
     if out is not None and out.is_dir():
         raise ConfigError(f"--out {out} is a folder; give the JSON file to write")
-    priced = RunConfig.from_yaml(_preset(profile, "--profile")).with_overrides(
-        pare={"advisor": name}
-    )
+    priced = load_preset(profile, "--profile").with_overrides(pare={"advisor": name})
     advisor = make_advisor(name, cfg, cache=cache)
     try:
         with Progress(console=console, transient=True) as bar:
@@ -805,9 +741,9 @@ def plan(
     from pirl.missions.write import mission_source, write_mission
 
     check_seed(seed)
-    if fly not in (None, "physics"):
+    if fly not in (None, Sim.PHYSICS):
         raise ConfigError(f"--fly {fly!r}: allowed value is physics")
-    cfg = _run_config(config)
+    cfg = load_preset(config)
     env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
     summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
     console.print(
@@ -855,7 +791,7 @@ def fly(
     """Fly a written mission in PyFlyt: its .plan files read back from disk, every sortie in
     order; flown coverage and energy beside the grid episode's, in flown.json."""
 
-    cfg = _run_config(config)
+    cfg = load_preset(config)
     _fly_and_print(mission, cfg.physics, wind)
 
 
@@ -883,7 +819,7 @@ def site_check(
 
     from pirl.missions import site_check as sc
 
-    env = _run_config(config).env if config else None
+    env = load_preset(config).env if config else None
     found, seen, report = sc.check_site(site, env)
     if picture is not None:
         report["picture"] = str(sc.picture(found, seen, picture))

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.recommendation import FORMAT_EXAMPLE
+from pirl.config.choices import Footprint
 from pirl.config.errors import ConfigError
 from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE, paper_half_width
 from pirl.config.run import TEMPLATE_VARIANT
@@ -46,7 +47,7 @@ __all__ = [
 
 VARIANTS: tuple[str, ...] = ("paper", "compact")
 """Prompt variants :func:`build_prompt` knows."""
-FOOTPRINTS: tuple[str, ...] = ("paper", "frustum")
+FOOTPRINTS: tuple[str, ...] = tuple(Footprint)
 """Footprint models a prompt can describe."""
 STATE_MARKER = "State:\n"
 """The line after which a prompt describes the state; everything before it is the same for

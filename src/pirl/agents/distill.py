@@ -25,6 +25,7 @@ from pirl.agents.loading import load_policy
 from pirl.agents.methods import ADVISED, BUILTIN, PLAYED_ALONE
 from pirl.agents.pirl_advice import build_pirl_advice, dataset_path
 from pirl.agents.run_folder import RunFolder, folder_contents, lock_folder, release_folder
+from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError, UserError
 from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
@@ -108,7 +109,7 @@ def distill(
                 RunFolder(Path(source)).finished_meta()
             else:
                 load_policy(source)
-    cfg = cfg.with_overrides(pare={"advisor": teacher, "mode": "student"})
+    cfg = cfg.with_overrides(pare={"advisor": teacher, "mode": PareMode.STUDENT})
     advice = build_pirl_advice(cfg, probe=True, seed=seed)
     advisor, student, dataset = advice.advisor, advice.student, advice.dataset
     assert student is not None and dataset is not None

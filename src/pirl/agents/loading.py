@@ -14,9 +14,10 @@ import numpy as np
 from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, method, trained_method
 from pirl.agents.policy import Policy
 from pirl.agents.run_folder import RETRAIN, RunFolder, short_error
+from pirl.config.choices import Act
 from pirl.config.errors import ConfigError, UserError
 
-ACT_MODES = ("stochastic", "greedy")
+ACT_MODES = tuple(Act)
 # A salt so the action stream of a scenario differs from the stream that drew the scenario.
 _ACT_SALT = 0x5EED
 

@@ -14,6 +14,7 @@ from typing import Any
 
 from pirl.advice.registry import find_advisor_kind
 from pirl.agents.methods import ADVISED
+from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.pare.bundle import AdviceBundle
@@ -30,7 +31,7 @@ def pirl_label(cfg: RunConfig, advisor_label: str) -> str:
     """The label of a PIRL configuration: advisor and model, mode, K, lam_cam and lam_move."""
     p = cfg.pare
     weights = f"lam_cam {_num(p.lam_cam)}, lam_move {_num(p.lam_move)}"
-    if p.mode == "student":
+    if p.mode == PareMode.STUDENT:
         return f"PIRL (student of {advisor_label}; {weights})"
     return f"PIRL ({p.mode} {advisor_label}, K {p.query_every}; {weights})"
 
@@ -58,7 +59,8 @@ def build_pirl_advice(
     """Build (and probe) the teacher, and in student mode the student and its dataset.
 
     ``run``: the run folder, which keys the run's own answers under
-    ``pare.student_dataset_scope: run``.
+    ``pare.student_dataset_scope: run`` (a run started from ``student_path`` learns under the
+    teacher's key its student was distilled under).
 
     ``student_path``: a student written by ``pirl distill`` to start from; its teacher must be
     the configured one. A probe answer that does not parse is a warning (``log``), not an
@@ -84,7 +86,7 @@ def build_pirl_advice(
     kind = find_advisor_kind(advisor.name)  # an advisor handed in may be of no kind
     rate = kind.teacher_rate(cfg) if kind else cfg.pare.teacher_rate
     batch = kind.batch_size(cfg) if kind else 4 * cfg.advisor.openai_concurrency
-    if cfg.pare.mode != "student":
+    if cfg.pare.mode != PareMode.STUDENT:
         return AdviceBundle(advisor, None, None, rate, batch, label)
     student, dataset = make_student(cfg, advisor, env_cfg, student_path, seed, run)
     return AdviceBundle(advisor, student, dataset, rate, batch, label)
@@ -126,7 +128,7 @@ def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> s
         f"teacher sent {sent:,} prompts, answered {ok:,}, unparseable {bad:,}, failed "
         f"{failed:,}, in flight at the end {flight:,}"
     ]
-    if stats.get("mode") == "student":
+    if stats.get("mode") == PareMode.STUDENT:
         passed = int(stats.get("gate_passed_at_step", -1))
         if passed < 0:
             kappa = float(stats.get("student_kappa", 0.0))
@@ -174,9 +176,9 @@ def make_student(
 
     dataset = TeacherDataset(dataset_path(cfg))
     key = teacher_key(advisor, cfg.pare.prompt_variant, env_cfg)
-    if cfg.pare.student_dataset_scope == "run":
-        if not run:
-            raise UserError("pare.student_dataset_scope: run needs a run folder (pirl train)")
+    # A run's own key (scope run); outside a run (distill, a teacher phase) and for a run that
+    # starts from a distilled student, the teacher's key, which that student was made under.
+    if cfg.pare.student_dataset_scope == DatasetScope.RUN and run and student_path is None:
         key += RUN_KEY + hashlib.sha256(run.encode()).hexdigest()[:12]
     if student_path is not None:
         path = Path(student_path)

@@ -14,8 +14,10 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.registry import advisor_kind
-from pirl.agents.methods import METHODS, TRAIN_IMITATION, TRAIN_PPO, trained_method
+from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
 from pirl.agents.run_folder import RunFolder
+from pirl.agents.settings import method_config, resolve_settings
+from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
 from pirl.config.run import RunConfig
@@ -34,32 +36,6 @@ def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]], worlds
     for size in sizes:
         check_memory(env.replace(size=tuple(size)), worlds)
         draw_scenario(env.replace(size=tuple(size)), np.random.default_rng(0))
-
-
-def check_budgets(cfg: RunConfig) -> None:
-    """Refuse in one line a ``train.steps_by_method`` name that is not a method trained in PPO
-    steps (called before any folder is made)."""
-    for name in cfg.train.steps_by_method:
-        if trained_method(name, "train.steps_by_method").training != TRAIN_PPO:
-            raise ConfigError(
-                f"train.steps_by_method: {name} is not trained in PPO steps "
-                f"(its budget is in the il section)"
-            )
-
-
-def method_steps(cfg: RunConfig, method: str) -> int:
-    """The steps ``method`` trains in ``cfg``: its ``train.steps_by_method`` entry, else
-    ``train.total_steps``."""
-    check_budgets(cfg)
-    return cfg.train.steps_by_method.get(method, cfg.train.total_steps)
-
-
-def method_config(cfg: RunConfig, method: str) -> RunConfig:
-    """``cfg`` as ``method`` trains it: total_steps set to :func:`method_steps`."""
-    steps = method_steps(cfg, method)
-    return (
-        cfg if steps == cfg.train.total_steps else cfg.with_overrides(train={"total_steps": steps})
-    )
 
 
 def train_one(
@@ -93,8 +69,8 @@ def train_one(
 def train_run(
     method: str,
     out: Path,
-    config: Path | None,
-    default_config: Path,
+    config: str | Path | None,
+    default_config: str | Path,
     steps: int | None = None,
     seed: int | None = None,
     advisor: str | None = None,
@@ -107,8 +83,9 @@ def train_run(
 
     ``site``: train on that site folder's map and seeded starts instead of generated worlds.
 
-    The config is the preset file ``config``; without one, a resumed run's own config.yaml,
-    else ``default_config``. ``seed`` defaults to 0, or to the resumed run's. ``steps`` and
+    The settings come from :func:`~pirl.agents.settings.resolve_settings`: the preset (name
+    or file) ``config``; without one, a resumed run's own config.yaml, else
+    ``default_config``. ``seed`` defaults to 0, or to the resumed run's. ``steps`` and
     ``advisor`` override ``train.total_steps`` (after the method's own
     ``train.steps_by_method`` entry) and ``pare.advisor``. Everything that can be
     refused (an unknown method or advisor, a missing key, an impossible layout, a missing
@@ -119,28 +96,14 @@ def train_run(
     if seed is not None:
         check_seed(seed)
     own = RunFolder(Path(out))
-    if resume and config is None and own.has_config:
-        cfg = own.config  # resume continues the run that is in the folder
-    else:
-        cfg = RunConfig.from_yaml(config or default_config)
     if seed is None:
         seed = own.seed if resume else 0
-    cfg = method_config(cfg, method)
-    if steps is not None:
-        cfg = cfg.with_overrides(train={"total_steps": steps})
-    if advisor is not None:
-        cfg = cfg.with_overrides(pare={"advisor": advisor})
-    if site is not None:
-        from pirl.world.seeable import with_site
-
-        on_site = with_site(cfg.env, str(site))
-        cfg = cfg.with_overrides(
-            env={
-                "site": on_site.site,
-                "size": list(on_site.size),
-                "ground_cells": on_site.ground_cells,
-            }
-        )
+    cfg = resolve_settings(
+        config, default=default_config, run=own.path if resume else None, method=method,
+        overrides={"train": {"total_steps": steps} if steps is not None else {},
+                   "pare": {"advisor": advisor} if advisor is not None else {}},
+        site=site,
+    )  # fmt: skip
     if entry.advised:
         advisor_kind(cfg.pare.advisor).check_key(cfg)
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
@@ -152,7 +115,7 @@ def train_run(
                 f"--method {method} needs --expert runs/<a finished {entry.expert} run>"
             )
         return train_il(cfg, expert, out, seed=seed, resume=resume)
-    if student is not None and (not entry.advised or cfg.pare.mode != "student"):
+    if student is not None and (not entry.advised or cfg.pare.mode != PareMode.STUDENT):
         advised = " or ".join(m.name for m in METHODS.values() if m.advised)
         raise ConfigError(f"--student needs --method {advised} with pare.mode student")
     from pirl.agents.train import train  # torch and SB3: only once everything is checked

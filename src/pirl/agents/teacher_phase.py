@@ -20,6 +20,7 @@ from typing import Any
 from pirl.advice.registry import advisor_kind
 from pirl.agents.methods import PLANNER
 from pirl.agents.pirl_advice import RUN_KEY, build_pirl_advice, dataset_path
+from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.run import RunConfig
 from pirl.pare.bundle import AdviceBundle
 
@@ -52,7 +53,7 @@ def needs_head_start(cfg: RunConfig, pare: dict[str, Any]) -> bool:
     """Whether a PIRL variant's teacher is an LLM (slower than the oracle) and the run learns
     from a student (the only mode whose shaping waits for teacher answers to pile up)."""
     merged = cfg.with_variant(pare).pare
-    return merged.mode == "student" and advisor_kind(merged.advisor).llm
+    return merged.mode == PareMode.STUDENT and advisor_kind(merged.advisor).llm
 
 
 def phase_of(cfg: RunConfig, pare: dict[str, Any]) -> TeacherPhase | None:
@@ -96,7 +97,11 @@ def _run_phase(
 
     # The phase runs in a worker process of its own: no child process for the model.
     run_cfg = cfg.with_overrides(
-        pare={**dict(phase.pare), "mode": "student", "student_dataset_scope": "shared"},
+        pare={
+            **dict(phase.pare),
+            "mode": PareMode.STUDENT,
+            "student_dataset_scope": DatasetScope.SHARED,
+        },
         advisor={"local_process": False},
     )
     started = time.perf_counter()

@@ -45,6 +45,7 @@ from pirl.agents.run_folder import (
 )
 from pirl.agents.schedules import learning_rate_of
 from pirl.agents.stops import TrainingInterrupted, TrainingStopped
+from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
@@ -308,7 +309,7 @@ class RunCallback(BaseCallback):
         st = pare.stats
         failed = st.answers_failed + st.answers_unparseable
         text = f"advisor answered {st.answers_ok:,} failed {failed:,}"
-        if pare.mode == "student":
+        if pare.mode == PareMode.STUDENT:
             text += f"  student agreement {st.student_agreement:.2f}"
         return text
 
@@ -386,7 +387,8 @@ def train(
 
     # 2. the run folder: new (config.yaml and meta.json record the run) or resumed.
     found = prepare_run_folder(run.path, resume, log)
-    if found is None and advice is not None and cfg.pare.student_dataset_scope == "run":
+    own = cfg.pare.student_dataset_scope == DatasetScope.RUN and student is None
+    if found is None and advice is not None and own:
         from pirl.agents.teacher_phase import take_head_start
 
         advice.drop_own_answers()  # an earlier run of this folder must not teach this one

@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from pirl.config.choices import Act, DatasetScope, PareMode
 from pirl.config.load import Settings, check_keys, check_seed
 from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
@@ -227,13 +228,13 @@ class PareSettings(Settings, section="pare"):
         self.require_positive(
             "query_every", "timeout_s", "student_fit_steps", "student_hidden", "failure_window"
         )
-        self.require_choice("mode", ("student", "sync", "async"))
+        self.require_choice("mode", PareMode)
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
             self.require_choice("prompt_variant", ("paper", "compact"))
         self.require_choice(
             "student_gate_on", ("kappa", "kappa_lcb", "move_kappa", "best_kappa", "agreement")
         )
-        self.require_choice("student_dataset_scope", ("shared", "run"))
+        self.require_choice("student_dataset_scope", DatasetScope)
         for key in (
             "teacher_rate", "oracle_teacher_rate", "student_gate", "max_failure_rate",
             "min_shaped", "student_kappa_gate", "student_gate_close",
@@ -356,7 +357,7 @@ class ReproduceSettings(Settings, section="reproduce"):
     """PIRL configurations, each a mapping of pare (or advisor) overrides (e.g. {advisor:
     oracle, lam_cam: 4, oracle_accuracy: 0.5}); empty = one PIRL with the preset's pare
     section and --advisor."""
-    acts: tuple[str, ...] = ("stochastic", "greedy")
+    acts: tuple[str, ...] = tuple(Act)
     """How trained policies act in evaluation (both are reported)."""
     headline_act: str = "stochastic"
     """The mode of the report's first table and figure, the same for every learned method."""

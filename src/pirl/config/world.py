@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pirl.config.choices import Footprint
 from pirl.config.errors import ConfigError
 from pirl.config.grid import (
     PAN_MAX,
@@ -212,7 +213,7 @@ class VCPPConfig(Settings, section="env"):
             raise self.refuse("size", "sides above 2048 cells are not supported")
         if not (math.isfinite(self.max_memory_gb) and self.max_memory_gb >= 0):
             raise self.refuse("max_memory_gb", "must be >= 0 (0: half of this machine's memory)")
-        self.require_choice("footprint", ("paper", "frustum"))
+        self.require_choice("footprint", Footprint)
         self.require_choice("reward", ("static", "ewri"))
         if not 0.0 <= self.wind_prob <= 1.0:
             raise self.refuse("wind_prob", "allowed range is [0, 1]")

@@ -29,6 +29,7 @@ from pirl.advice.state import view_requests
 from pirl.advice.student import cohen_kappa
 from pirl.agents.methods import ADVISED, PLAYED_ALONE
 from pirl.config import grid
+from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.evaluate.scenarios import validation_seeds
@@ -280,12 +281,12 @@ def run_calls(cfg: RunConfig, advisor: str, gate_open: bool = False) -> int:
     profile's head start (LLM teachers only); otherwise one answer per world every
     ``pare.query_every`` steps."""
     from pirl.advice.registry import advisor_kind
-    from pirl.agents.runs import method_steps
+    from pirl.agents.settings import method_steps
 
     steps = method_steps(cfg, ADVISED.name)
     kind = advisor_kind(advisor)
     p = cfg.pare
-    if p.mode == "student":
+    if p.mode == PareMode.STUDENT:
         head_start = int(cfg.reproduce.teacher_phase_answers) if kind.llm else 0
         rate = kind.teacher_rate(cfg) * (1.0 if gate_open else p.student_closed_rate)
         return int(math.ceil(rate * steps)) + head_start

@@ -28,13 +28,15 @@ from pirl.advice.registry import DEFAULT_ADVISOR, builtin_of_label, find_advisor
 from pirl.agents.loading import ACT_MODES, BUILTIN, check_act
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_advised_key, label
 from pirl.agents.run_folder import RunFolder
+from pirl.config.choices import Sim
 from pirl.config.errors import ConfigError
+from pirl.config.physics import PhysicsConfig
 from pirl.config.run import RunConfig
 from pirl.config.world import OBS_BLOCKS, VCPPConfig
 from pirl.evaluate.scenarios import scenario_seeds, size_name
 from pirl.evaluate.summary import SITE_PREFIX, write_summary
 
-SIMS = ("grid", "physics")
+SIMS = tuple(Sim)
 FIXED = "fixed"  # the act of built-in methods: they act by their own rule in both modes
 
 
@@ -182,7 +184,7 @@ def run_chunk(
     from pirl.evaluate.rollout import run_batch, run_episode
 
     _quiet.install()  # a worker process: no third-party banners or deprecation noise
-    if sim == "physics":
+    if sim == Sim.PHYSICS:
         _quiet.import_quietly("pybullet")
     torch.set_num_threads(1)
     config = RunConfig.from_dict(config_dict)
@@ -211,7 +213,7 @@ def run_chunk(
         calls_before = getattr(policy, "calls", 0)
         if batch:
             metrics = batch[k]
-        elif sim == "physics":
+        elif sim == Sim.PHYSICS:
             from pirl.physics import run_physics_episode
 
             metrics = run_physics_episode(env_cfg, policy, seed, config.physics)
@@ -253,7 +255,7 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
                     tasks.append((spec, size, sim, seeds[i : i + chunk], act))
     # Longest first, so no long episode starts last while the other workers idle: the
     # physics simulator's (seconds each), then the grid's largest worlds.
-    tasks.sort(key=lambda t: (t[2] != "physics", -_grid_size(t[1])[0] * _grid_size(t[1])[1]))
+    tasks.sort(key=lambda t: (t[2] != Sim.PHYSICS, -_grid_size(t[1])[0] * _grid_size(t[1])[1]))
     return tasks
 
 
@@ -346,7 +348,7 @@ def evaluate(
                 "sims": plan.sims,
                 "acts": plan.acts,
                 "env": env_dict,
-                "physics": config_dict["physics"],
+                PhysicsConfig.section: config_dict[PhysicsConfig.section],
             },
             indent=2,
         )

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from pirl.config.choices import PareMode
 from pirl.pare.alignment import _align_one
 
-STATUSES = ("missing", "fresh", "cached", "stale", "student")
+STATUSES = ("missing", "fresh", "cached", "stale", PareMode.STUDENT.value)
 MISSING, FRESH, CACHED, STALE, STUDENT = range(5)
 KIND_TEACHER, KIND_CACHED, KIND_STUDENT = 0, 1, 2
 """Where a world's advice came from (column KIND of the metadata)."""

@@ -18,7 +18,7 @@ from pirl import _quiet
 from pirl.advice.registry import DEFAULT_ADVISOR
 from pirl.agents.loading import BUILTIN
 from pirl.agents.methods import ADVISED, asks, method
-from pirl.agents.run_folder import RunFolder
+from pirl.agents.run_folder import RunFolder, folder_lock
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.evaluate.runner import (
@@ -61,10 +61,12 @@ def train_all(
     torch and one numba thread; with ``ray_address`` they go to Ray instead. A run trains the
     same model whichever way (:func:`~pirl.reproduce.plan.run_plan`).
     """
-    plan = make_plan(check_reproduce(cfg, advisor, workers), Path(out))
-    for line in plan.status_lines():
-        log(line)
-    run_plan(plan, executor_for(plan, ray_address), log, show_progress)
+    checked = check_reproduce(cfg, advisor, workers)  # refused before any folder is made
+    with folder_lock(Path(out)):  # the plan reads the run folders already there
+        plan = make_plan(checked, Path(out))
+        for line in plan.status_lines():
+            log(line)
+        run_plan(plan, executor_for(plan, ray_address), log, show_progress)
     return plan.folders
 
 
@@ -130,14 +132,20 @@ def reproduce(
     show_progress: bool = True,
     ray_address: str | None = None,
 ) -> Path:
-    """The main job. Returns the path of ``report.html``.
+    """The main job (``pirl reproduce``, ``pirl demo``). Returns the path of ``report.html``.
 
-    ``workers`` training processes at once (default ``reproduce.train_workers``, 0 = the
-    cores) and evaluation processes (default ``reproduce.workers``). ``ray_address`` sends
-    training runs and evaluation episodes to Ray (``pirl[distributed]``).
+    Everything the profile can be refused for is checked before any folder is made; then,
+    under ``out``'s lock (a second reproduction into the same folder is refused), the plan
+    is made from the run folders already there and run. ``workers`` training processes at
+    once (default ``reproduce.train_workers``, 0 = the cores) and evaluation processes
+    (default ``reproduce.workers``). ``ray_address`` sends training runs and evaluation
+    episodes to Ray (``pirl[distributed]``).
     """
-    plan = make_plan(check_reproduce(cfg, advisor, workers), Path(out))
-    return run_reproduction(plan, log, progress, show_progress, ray_address)
+    checked = check_reproduce(cfg, advisor, workers)
+    log(f"reproduce: advisor {advisor}, output {out}")
+    with folder_lock(Path(out)):
+        return run_reproduction(make_plan(checked, Path(out)), log, progress, show_progress,
+                                ray_address)  # fmt: skip
 
 
 def run_reproduction(

@@ -24,8 +24,10 @@ from pirl.advice.registry import advisor_kind
 from pirl.agents.loading import check_act
 from pirl.agents.methods import asks, label, trained_method
 from pirl.agents.run_folder import RunFolder
-from pirl.agents.runs import check_budgets, check_layouts, method_steps
+from pirl.agents.runs import check_layouts
+from pirl.agents.settings import check_budgets, method_steps
 from pirl.agents.teacher_phase import TeacherPhase, phase_of
+from pirl.config.choices import PareMode, Sim
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.evaluate.executors import ExecutorChoice, open_executor
@@ -295,13 +297,13 @@ class Plan:
             env=self.cfg.env,
             config=self.cfg,
             episodes_per_method={m: rp.llm_only_episodes for m in rp.builtins if asks(m)},
-            sims=["grid", "physics"] if ev.physics_sizes else ["grid"],
-            sim_sizes={"physics": list(ev.physics_sizes)},
-            sim_episodes={"physics": rp.physics_episodes},
+            sims=list(Sim) if ev.physics_sizes else [Sim.GRID],
+            sim_sizes={Sim.PHYSICS: list(ev.physics_sizes)},
+            sim_episodes={Sim.PHYSICS: rp.physics_episodes},
             acts=list(rp.acts),
-            sim_acts={"physics": [rp.headline_act]},  # the physics simulator flies slowly
+            sim_acts={Sim.PHYSICS: [rp.headline_act]},  # the physics simulator flies slowly
             sites=list(ev.sites),
-            sim_sites={"physics": []},  # reproduce.sites: zero-shot in the grid simulator
+            sim_sites={Sim.PHYSICS: []},  # reproduce.sites: zero-shot in the grid simulator
         )
 
 
@@ -455,7 +457,7 @@ def _run_seconds(cfg: RunConfig, run: PlannedRun) -> float:
     pare = cfg.with_variant(dict(run.pare)).pare
     kind = advisor_kind(run.advisor)
     seconds = steps * kind.train_cost / RATES["ppo_steps_per_s"]
-    if pare.mode != "student" and kind.sync_batch_s:  # every K steps a batch of answers
+    if pare.mode != PareMode.STUDENT and kind.sync_batch_s:  # every K steps a batch of answers
         seconds += steps / pare.query_every / kind.batch_size(cfg) * kind.sync_batch_s
     return seconds
 

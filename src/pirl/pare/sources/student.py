@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from pirl.advice.student import Student, TeacherDataset, pose_features
+from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.env.shaping import ShapingHooks
 from pirl.pare.board import AdviceBoard
@@ -48,7 +49,7 @@ class StudentSource:
         timeout_s: the longest such wait.
     """
 
-    mode = "student"
+    mode = PareMode.STUDENT
 
     def __init__(
         self,

@@ -1,0 +1,87 @@
+"""The one settings resolver: what every command's run reads, settled once.
+
+:func:`resolve_settings` takes what a command was given (a preset or YAML file, a resumed run
+folder, the method, section overrides from options, a site folder) and returns the one
+:class:`~pirl.config.run.RunConfig` the rest of the run reads; nothing downstream settles
+settings again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from pirl.agents.methods import TRAIN_PPO, trained_method
+from pirl.agents.run_folder import RunFolder
+from pirl.config.errors import ConfigError
+from pirl.config.presets import load_preset
+from pirl.config.run import RunConfig
+
+
+def check_budgets(cfg: RunConfig) -> None:
+    """Refuse in one line a ``train.steps_by_method`` name that is not a method trained in PPO
+    steps (called before any folder is made)."""
+    for name in cfg.train.steps_by_method:
+        if trained_method(name, "train.steps_by_method").training != TRAIN_PPO:
+            raise ConfigError(
+                f"train.steps_by_method: {name} is not trained in PPO steps "
+                f"(its budget is in the il section)"
+            )
+
+
+def method_steps(cfg: RunConfig, method: str) -> int:
+    """The steps ``method`` trains in ``cfg``: its ``train.steps_by_method`` entry, else
+    ``train.total_steps``."""
+    check_budgets(cfg)
+    return cfg.train.steps_by_method.get(method, cfg.train.total_steps)
+
+
+def method_config(cfg: RunConfig, method: str) -> RunConfig:
+    """``cfg`` as ``method`` trains it: total_steps set to :func:`method_steps`."""
+    steps = method_steps(cfg, method)
+    return (
+        cfg if steps == cfg.train.total_steps else cfg.with_overrides(train={"total_steps": steps})
+    )
+
+
+def resolve_settings(
+    config: str | Path | None = None,
+    *,
+    default: str | Path | None = None,
+    run: Path | None = None,
+    method: str | None = None,
+    overrides: Mapping[str, Mapping[str, Any]] | None = None,
+    site: Path | None = None,
+    option: str = "--config",
+) -> RunConfig:
+    """The settings of one command, in this order:
+
+    1. the preset or file ``config``; without one, the run folder ``run``'s own config.yaml
+       (a resumed run continues as it began), else ``default``, else the defaults;
+    2. ``method``'s own budget and env (``train.steps_by_method``, what it trains on);
+    3. ``overrides``, section by section (command-line options: ``{"train": {...}}``);
+    4. ``site``: the site folder's map, size and ground cells in place of generated worlds.
+    """
+    own = RunFolder(Path(run)) if run is not None else None
+    if config is None and own is not None and own.has_config:
+        cfg = own.config
+    else:
+        cfg = load_preset(config if config is not None else default, option)
+    if method is not None:
+        cfg = method_config(cfg, method)
+    changes = {k: dict(v) for k, v in (overrides or {}).items() if v}
+    if changes:
+        cfg = cfg.with_overrides(**changes)
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        on_site = with_site(cfg.env, str(site))
+        cfg = cfg.with_overrides(
+            env={"site": on_site.site, "size": list(on_site.size),
+                 "ground_cells": on_site.ground_cells},
+        )  # fmt: skip
+    return cfg
+
+
+__all__ = ["check_budgets", "method_config", "method_steps", "resolve_settings"]
