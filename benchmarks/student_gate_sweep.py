@@ -31,7 +31,7 @@ def main() -> None:
     os.environ.setdefault("PIRL_CACHE_DIR", tempfile.mkdtemp(prefix="pirl-gate-"))
 
     from pirl.agents.distill import distill
-    from pirl.cli import _preset
+    from pirl.config.presets import preset_path as _preset
     from pirl.config.run import RunConfig
 
     base = RunConfig.from_yaml(_preset(args.config, "--config"))

@@ -116,7 +116,7 @@ def main() -> None:
     from pirl.advice.oracle import OracleAdvisor
     from pirl.advice.student import encode
     from pirl.agents.distill import collect_states
-    from pirl.cli import _preset
+    from pirl.config.presets import preset_path as _preset
     from pirl.config.run import RunConfig
 
     cfg = RunConfig.from_yaml(_preset(args.config, "--config"))

@@ -344,7 +344,8 @@ def test_progress_of_an_evaluation_says_its_total_when_it_is_reached():
 def test_small_cli_outputs(tmp_path):
     from pirl.advice.parser import parse_recommendation
     from pirl.advice.recommendation import FORMAT_EXAMPLE
-    from pirl.cli import _copies_format_example, _mean_ci
+    from pirl.terminal import copies_format_example as _copies_format_example
+    from pirl.terminal import mean_ci as _mean_ci
 
     assert _mean_ci(0.5, float("nan")) == "0.500"
     assert _mean_ci(0.5, 0.1) == "0.500 ± 0.100"

@@ -142,10 +142,11 @@ def reproduce(
     episodes to Ray (``pirl[distributed]``).
     """
     checked = check_reproduce(cfg, advisor, workers)
-    log(f"reproduce: advisor {advisor}, output {out}")
     with folder_lock(Path(out)):
-        return run_reproduction(make_plan(checked, Path(out)), log, progress, show_progress,
-                                ray_address)  # fmt: skip
+        return run_reproduction(
+            make_plan(checked, Path(out)), log=log, progress=progress,
+            show_progress=show_progress, ray_address=ray_address,
+        )  # fmt: skip
 
 
 def run_reproduction(
