@@ -88,6 +88,8 @@ def test_plan_runs_runs_once_per_pirl_reproduce(tmp_path, monkeypatch):
             return _real(*args)
 
         monkeypatch.setattr(plan_module, name, count)
+        if hasattr(reproduce_module, name):  # the reproduce sequence calls it by its own name
+            monkeypatch.setattr(reproduce_module, name, count)
     plans: list[Plan] = []
 
     def stop_before_training(plan: Plan, **_: object) -> Path:
