@@ -38,7 +38,7 @@ def pirl_label(cfg: RunConfig, advisor_label: str) -> str:
 
 def dataset_path(cfg: RunConfig) -> Path:
     """Where the teacher answers live (``pare.student_dataset`` or beside the answer cache)."""
-    from pirl.advice.student import default_dataset_path
+    from pirl.advice.teacher_dataset import default_dataset_path
 
     return (
         Path(cfg.pare.student_dataset).expanduser()

@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the student pulls in torch; a run without one never needs it
     from pirl.advice.base import Advisor
-    from pirl.advice.student import Student, TeacherDataset
+    from pirl.advice.student import Student
+    from pirl.advice.teacher_dataset import TeacherDataset
 
 
 @dataclass

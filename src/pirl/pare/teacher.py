@@ -19,7 +19,8 @@ import numpy as np
 
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.factory import exhausted
-from pirl.advice.student import TeacherDataset, encode
+from pirl.advice.student import encode
+from pirl.advice.teacher_dataset import TeacherDataset
 from pirl.env.shaping import ShapingHooks
 from pirl.pare.asking import requests
 

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from pirl.advice.student import Student, TeacherDataset, pose_features
+from pirl.advice.student import Student, pose_features
+from pirl.advice.teacher_dataset import TeacherDataset
 from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.env.shaping import ShapingHooks
