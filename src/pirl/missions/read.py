@@ -165,6 +165,8 @@ def _text_number(token: str, where: str, unused: bool = False) -> float:
     """A finite float from a ``.waypoints`` column; ``nan`` is unused where ``unused``."""
     if unused and token.lower() in ("nan", "+nan", "-nan"):
         return NAN
+    if token.lower().lstrip("+-") in ("inf", "infinity", "nan"):
+        raise UserError(f"{where}: {_show(token)} is not a finite number")
     if not _FLOAT.fullmatch(token):
         raise UserError(f"{where}: {_show(token)} is not a number")
     out = float(token)
@@ -190,10 +192,24 @@ def _home(lat: float, lon: float, where: str) -> None:
 
 
 # -- what each item means ---------------------------------------------------------------------
+def param_label(command: int, k: int) -> str:
+    """What params[k] (0-based) of a flown command holds, as `` (latitude)``; "" otherwise."""
+    m = dialect()
+    labels: dict[int, dict[int, str]] = {
+        m.MAV_CMD_NAV_TAKEOFF: {4: "latitude", 5: "longitude", 6: "altitude"},
+        m.MAV_CMD_NAV_WAYPOINT: {4: "latitude", 5: "longitude", 6: "altitude"},
+        m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: {0: "pitch", 1: "yaw"},
+        m.MAV_CMD_DO_MOUNT_CONTROL: {0: "pitch", 2: "yaw"},
+        m.MAV_CMD_SET_CAMERA_ZOOM: {0: "zoom type", 1: "zoom"},
+    }
+    label = labels.get(command, {}).get(k)
+    return f" ({label})" if label else ""
+
+
 def check_item(item: MissionItem, where: str, field: Any) -> None:
     """Refuse an item ``pirl fly`` would misread: a command MAVLink lacks, a flown position
     in another frame, off the Earth or without coordinates, a camera value out of range.
-    ``field(k)`` names params[k] as the file spells it."""
+    ``field(k)`` names params[k] as the file spells it, with what it holds."""
     m = dialect()
     p, c = item.params, item.command
     kind = role(c)
@@ -205,28 +221,28 @@ def check_item(item: MissionItem, where: str, field: Any) -> None:
                 f"{where}, frame: {item.frame} ({frame_name(item.frame)}); pirl fly reads a "
                 "position relative to home (3), above sea level (0) or above terrain (10)"
             )
-        for k, label in ((4, "latitude"), (5, "longitude"), (6, "altitude")):
+        for k in (4, 5, 6):
             if math.isnan(p[k]):
-                raise UserError(f"{where}, {field(k)} ({label}): missing (a position needs it)")
+                raise UserError(f"{where}, {field(k)}: missing (a position needs it)")
         if not -90.0 <= p[4] <= 90.0:
-            raise UserError(f"{where}, {field(4)} (latitude): {p[4]:g} is outside [-90, 90]")
+            raise UserError(f"{where}, {field(4)}: {p[4]:g} is outside [-90, 90]")
         if not -180.0 <= p[5] <= 180.0:
-            raise UserError(f"{where}, {field(5)} (longitude): {p[5]:g} is outside [-180, 180]")
+            raise UserError(f"{where}, {field(5)}: {p[5]:g} is outside [-180, 180]")
     elif c in (m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, m.MAV_CMD_DO_MOUNT_CONTROL):
         yaw = 1 if c == m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW else 2
         # NaN (null) leaves the angle as it is, as MAVLink defines for the gimbal manager.
         if not math.isnan(p[0]) and not -180.0 <= p[0] <= 180.0:
-            raise UserError(f"{where}, {field(0)} (pitch): {p[0]:g} is outside [-180, 180]")
+            raise UserError(f"{where}, {field(0)}: {p[0]:g} is outside [-180, 180]")
         if not math.isnan(p[yaw]) and not -360.0 <= p[yaw] <= 360.0:
-            raise UserError(f"{where}, {field(yaw)} (yaw): {p[yaw]:g} is outside [-360, 360]")
+            raise UserError(f"{where}, {field(yaw)}: {p[yaw]:g} is outside [-360, 360]")
     elif c == m.MAV_CMD_SET_CAMERA_ZOOM:
         if p[0] != m.ZOOM_TYPE_RANGE:
             raise UserError(
-                f"{where}, {field(0)} (zoom type): {p[0]:g}; pirl fly reads ZOOM_TYPE_RANGE "
+                f"{where}, {field(0)}: {p[0]:g}; pirl fly reads ZOOM_TYPE_RANGE "
                 f"({m.ZOOM_TYPE_RANGE}), a share of the lens's range"
             )
         if math.isnan(p[1]) or not 0.0 <= p[1] <= 100.0:
-            raise UserError(f"{where}, {field(1)} (zoom): {p[1]:g} is outside [0, 100] %")
+            raise UserError(f"{where}, {field(1)}: {p[1]:g} is outside [0, 100] %")
 
 
 # -- .plan ------------------------------------------------------------------------------------
@@ -289,9 +305,13 @@ def _plan_item(path: Path, n: int, raw: Any) -> MissionItem:
     params = raw.get("params")
     if not isinstance(params, list) or len(params) != 7:
         raise UserError(f"{where}, params: {_show(params)} is not a list of 7")
-    values = tuple(_number(v, f"{where}, params[{k}]", unused=True) for k, v in enumerate(params))
+
+    def field(k: int) -> str:
+        return f"params[{k}]{param_label(command, k)}"
+
+    values = tuple(_number(v, f"{where}, {field(k)}", unused=True) for k, v in enumerate(params))
     item = MissionItem(n, command, frame, values)
-    check_item(item, where, lambda k: f"params[{k}]")
+    check_item(item, where, field)
     return item
 
 
@@ -335,11 +355,15 @@ def read_waypoints(path: str | Path) -> MissionFile:
             home = (lat, lon, alt)
             continue
         where = f"{where} ({command_name(command)})"
+
+        def field(k: int, command: int = command) -> str:
+            return f"column {k + 5}{param_label(command, k)}"
+
         values = tuple(
-            _text_number(cols[k], f"{where}, column {k + 1}", unused=True) for k in range(4, 11)
+            _text_number(cols[k + 4], f"{where}, {field(k)}", unused=True) for k in range(7)
         )
         item = MissionItem(seq, command, frame, values)
-        check_item(item, where, lambda k: f"column {k + 5}")
+        check_item(item, where, field)
         items.append(item)
     if home is None:
         raise UserError(f"{path}: no items (not even home, item 0)")
@@ -407,6 +431,7 @@ __all__ = [
     "command_name",
     "disagreement",
     "frame_name",
+    "param_label",
     "read_mission",
     "read_plan",
     "read_waypoints",
