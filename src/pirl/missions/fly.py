@@ -2,7 +2,8 @@
 in the PyFlyt backend, with wind.
 
 Nothing of the episode the mission was written from is used: the ``.plan`` files (one per
-sortie, in order) are read from disk, every waypoint's latitude, longitude and altitude is
+sortie, in order, as ``summary.json`` lists them) are read from disk and checked by
+:mod:`pirl.missions.read`, every waypoint's latitude, longitude and altitude (in its frame) is
 turned back into a grid cell through the same geo-reference the writer used, every gimbal and
 zoom command into a camera setting (the inverse functions of :mod:`pirl.missions.write`),
 and a :class:`FileFollower` flies them as the grid's own actions: one-cell moves towards the

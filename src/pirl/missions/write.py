@@ -5,7 +5,9 @@ camera commands where the camera changes, waypoints (straight runs of moves with
 camera merged into one leg, photos triggered by distance along it), an image capture wherever
 a view adds cells, return to launch; split into sorties that each fit one battery and
 ``mission.max_items``. Files: QGroundControl ``.plan`` (JSON), ``QGC WPL 110`` ``.waypoints``
-(written by pymavlink's ``mavwp``), ``path.geojson``, ``path.kml`` and ``summary.json``.
+(``mavwp``'s layout, 8 decimals of a degree), ``path.geojson``, ``path.kml`` and
+``summary.json`` (with a checksum of every other file), staged beside ``--out`` and renamed
+into place whole.
 Every MAVLink number comes from pymavlink's dialect. Axes and angles: docs/missions.md.
 """
 
