@@ -148,12 +148,12 @@ def _edited(folder: Path, summary: dict[str, Any]) -> tuple[list[str], list[str]
 def _cell(geo: Geo, lat: float, lon: float, alt: float, size: tuple[int, ...], where: str) -> Cell:
     x, y = geo.georef.cells_from_lonlat(np.array([lon]), np.array([lat]))
     if not (math.isfinite(x[0]) and math.isfinite(y[0])):
-        raise UserError(f"{where}: lat {lat:.7f}, lon {lon:.7f} has no place on the grid's map")
+        raise UserError(f"{where}, position: lat {lat:.7f}, lon {lon:.7f} is off the grid's map")
     cell = (int(math.floor(x[0])), int(math.floor(y[0])), round(alt / geo.level_m) - 1)
     if not all(0 <= c < s for c, s in zip(cell, size, strict=True)):
         raise UserError(
-            f"{where}: lat {lat:.7f}, lon {lon:.7f}, {alt:g} m above home lies outside the "
-            f"{'x'.join(map(str, size))} world the mission was written for"
+            f"{where}, position: lat {lat:.7f}, lon {lon:.7f}, {alt:g} m above home lies "
+            f"outside the {'x'.join(map(str, size))} world the mission was written for"
         )
     return cell
 
@@ -237,7 +237,8 @@ def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
                           "pirl plan ran, or copy the site back)")  # fmt: skip
     plans = _plan_files(folder, summary, summary_file)
     edited, warnings = _edited(folder, summary)
-    # The writer's geo-reference: the world's cells on the Earth; home is only a label here.
+    # The writer's geo-reference places the world's cells on the Earth; each file's home gives
+    # only the height that positions above sea level are measured from.
     geo = geo_for(env, settings, (0, 0, 0))
     ops: list[Op] = []
     skipped: dict[str, int] = {}
