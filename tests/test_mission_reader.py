@@ -14,6 +14,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tracemalloc
 from pathlib import Path
 from typing import Any
 
@@ -249,13 +250,23 @@ def mutated_waypoints(draw, base: str) -> bytes:
     return _as_bytes(draw, "\n".join("\t".join(cols) for cols in lines) + "\n")
 
 
+PEAK_BYTES = 256 * 2**20
+"""The most memory one read may take: the file's bound (16 MB) parsed into Python objects."""
+
+
 def _read_and_convert(path: Path, geo: Any) -> None:
-    """The reader and the conversion to the flight's ops: a result or one UserError."""
+    """The reader and the conversion to the flight's ops: a result or one UserError, within
+    :data:`PEAK_BYTES` of memory."""
+    tracemalloc.start()
     try:
         mission = R.read_mission(path)
         mission_ops(mission, geo, (10, 10, 3), [0, 0, 10])
     except UserError as exc:
         assert "\n" not in str(exc) and str(path) in str(exc)
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    assert peak < PEAK_BYTES, peak
 
 
 def _geo(written: Path) -> Any:
