@@ -106,6 +106,18 @@ def test_stale_staging_folders_go_and_a_running_writers_stay(tmp_path: Path) -> 
     assert not dead.exists() and live.exists() and other.exists() and user.exists()
 
 
+def test_flown_json_is_replaced_whole_and_a_killed_writers_temporary_goes(tmp_path: Path) -> None:
+    from pirl.missions.fly import _write
+
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    stale = tmp_path / f".flown.json.{int(done.stdout)}.tmp"
+    stale.write_text('{"vcr": ')  # what a kill mid-write leaves
+    _write(tmp_path / "flown.json", '{"vcr": 1.0}\n')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flown.json"]
+    assert json.loads((tmp_path / "flown.json").read_text()) == {"vcr": 1.0}
+
+
 def test_a_plan_killed_mid_write_leaves_nothing_and_the_next_run_clears_its_staging(
     tmp_path: Path,
 ) -> None:
