@@ -124,6 +124,41 @@ def test_a_clean_run_loads_and_plays_without_unpickling(runs, tmp_path, monkeypa
     assert policy.act_batch(obs, None, masks).shape == (2,)
 
 
+def test_model_zip_holds_no_generator_and_numpy_2s_is_read_without_unpickling(
+    runs, tmp_path, monkeypatch
+):
+    """A model.zip pirl writes names no numpy.random global (under numpy 1 and 2 alike); one
+    written by numpy 2 with its spaces' generators (a real entry, tests/data) still loads."""
+    from pirl.agents.loading import load_policy
+
+    models = [runs["done"] / "model.zip", *sorted(runs["done"].glob("checkpoints/*/model.zip"))]
+    assert len(models) >= 2
+    for model in models:
+        with zipfile.ZipFile(model) as archive:
+            data = json.loads(archive.read("data"))
+        for key, value in data.items():
+            if isinstance(value, dict) and ":serialized:" in value:
+                names = safe_state.pickle_globals(base64.b64decode(value[":serialized:"]))
+                assert not [n for n in names if n.startswith("numpy.random")], (model, key)
+    run = _copy(runs["done"], tmp_path / "numpy2")
+    entry = json.loads((ROOT / "tests" / "data" / "numpy2_action_space.json").read_text())
+    with zipfile.ZipFile(run / "model.zip") as archive:
+        members = {n: archive.read(n) for n in archive.namelist()}
+    data = json.loads(members["data"])
+    data["action_space"] = entry["action_space"]
+    members["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(run / "model.zip", "w") as archive:
+        for name, content in members.items():
+            archive.writestr(name, content)
+
+    def refuse(*_a, **_k):
+        raise AssertionError("cloudpickle.loads was called")
+
+    monkeypatch.setattr(cloudpickle, "loads", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    assert load_policy(run, act="greedy").model.action_space.n > 0
+
+
 def test_an_il_expert_with_a_payload_is_refused(runs, tmp_path):
     run = _copy(runs["done"], tmp_path / "expert")
     marker = tmp_path / "marker"

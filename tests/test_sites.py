@@ -304,7 +304,7 @@ def bad_site(tmp_path: Path, name: str) -> Path:
 MISTAKES = {
     "not-a-raster": "not a readable png raster",
     "tif-no-crs": "has no CRS",
-    "area-outside": "outside the raster",
+    "area-outside": r"spans x 50 to 60, y 50 to 60 \(cell units\), the grid x 0 to 10, y 0 to 10",
     "nan": "NaN or nodata",
     "negative": "negative",
     "start-in-building": "inside a building",
@@ -313,6 +313,27 @@ MISTAKES = {
     "too-large": "site.max_cells",
     "unknown-key": "cell_size_m",
 }
+
+
+def test_an_area_or_start_off_a_georeferenced_grid_is_named_in_degrees(tmp_path: Path) -> None:
+    """Both the polygon's extent and the grid's in the GeoJSON's longitude/latitude (the
+    site's projected metres or cell units labelled as degrees would mislead)."""
+    import re
+
+    h = np.zeros((10, 10))
+    area = write_site(tmp_path / "area", h, cell_size_m=10.0, origin=[48.15, 11.57],
+                      area="a.geojson")  # fmt: skip
+    (area / "a.geojson").write_text(json.dumps(square(11.60, 48.20, 11.61, 48.21)))
+    with pytest.raises(ConfigError) as caught:
+        load_site(area)
+    line = str(caught.value)
+    assert "spans lon 11.600000 to 11.610000, lat 48.200000 to 48.210000 (WGS84" in line, line
+    grid = r"the grid lon 11\.570000 to 11\.5713\d+, lat 48\.150000 to 48\.1508\d+ \(WGS84"
+    assert re.search(grid, line), line
+    start = write_site(tmp_path / "start", h, cell_size_m=10.0, origin=[48.15, 11.57],
+                       start={"lat": 48.3, "lon": 11.57})  # fmt: skip
+    with pytest.raises(ConfigError, match=r"lies outside the 10 x 10 grid, which spans lon 11\.5"):
+        load_site(start)
 
 
 @pytest.mark.parametrize("name", sorted(MISTAKES))

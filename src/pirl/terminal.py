@@ -340,10 +340,20 @@ def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
     from pirl.missions.fly import fly_mission, read_flight
 
     files = read_flight(folder)
+    for line in files.warnings:
+        err.print(f"[bold yellow]warning:[/] {escape(line)}", soft_wrap=True)
     console.print(
         f"flying {folder} back from {', '.join(files.plans)} ({len(files.ops)} waypoints and "
         f"camera settings) in PyFlyt{' with wind' if wind else ', no wind'} ..."
     )
+    if files.skipped:
+        named = ", ".join(f"{name} x{count}" for name, count in sorted(files.skipped.items()))
+        console.print(
+            f"not flown: {sum(files.skipped.values())} item(s) pirl fly does not fly: {named} "
+            "(docs/missions.md)",
+            highlight=False,
+            soft_wrap=True,
+        )
     f = fly_mission(files, physics, wind, log=lambda line: console.print(line, highlight=False))
     console.print(
         f"flown: VCR {f['vcr']:.3f} (grid episode {f['vcr_grid']:.3f}), energy "

@@ -30,6 +30,23 @@ if TYPE_CHECKING:  # SB3 brings torch: reading a run folder needs neither
     from pirl.env.sb3_vec import VCPPVecEnv
 
 
+def save_model(model: Any, path: Path) -> None:
+    """``model.save(path)`` without the spaces' random generators: SB3 pickles each space
+    whole, and a generator pickles as different numpy globals under numpy 1 and 2, which the
+    safe loader (:data:`pirl.agents.loading.SB3_GLOBALS`) would have to trust. Nothing reads
+    them back (the loader rebuilds the spaces from config.yaml); training keeps its own."""
+    spaces = [getattr(model, k, None) for k in ("observation_space", "action_space")]
+    spaces = [s for s in spaces if s is not None and hasattr(s, "_np_random")]
+    kept = [s._np_random for s in spaces]
+    try:
+        for space in spaces:
+            space._np_random = None
+        model.save(path)
+    finally:
+        for space, rng in zip(spaces, kept, strict=True):
+            space._np_random = rng
+
+
 def capture(model: PPO, monitor: VecMonitor, venv: VCPPVecEnv, pare: Any | None) -> dict:
     """An in-memory copy of the whole training state (taken at a rollout boundary)."""
     state: dict[str, Any] = {
@@ -94,7 +111,7 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
         model.policy.load_state_dict(state["policy"])
         model.policy.optimizer.load_state_dict(state["optimizer"])
         model.num_timesteps = state["num_timesteps"]
-        model.save(tmp / "model.zip")
+        save_model(model, tmp / "model.zip")
     finally:
         model.policy.load_state_dict(live)
         model.policy.optimizer.load_state_dict(live_opt)

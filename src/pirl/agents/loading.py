@@ -270,6 +270,12 @@ SB3_GLOBALS = frozenset(
         "numpy._core.multiarray._reconstruct",
         "numpy.random._pickle.__generator_ctor",
         "numpy.random._pickle.__bit_generator_ctor",
+        # A space's generator as numpy 2 pickles it, in runs written before save_model left
+        # generators out (pirl.agents.checkpoint); Cython's unpickle of a SeedSequence only
+        # restores its fields.
+        "numpy.random._pcg64.PCG64",
+        "numpy.random.bit_generator.SeedSequence",
+        "numpy.random.bit_generator.__pyx_unpickle_SeedSequence",
         "stable_baselines3.common.utils.FloatSchedule",
         "stable_baselines3.common.utils.ConstantSchedule",
         "stable_baselines3.common.utils.LinearSchedule",

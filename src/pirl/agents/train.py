@@ -459,7 +459,7 @@ def _finish(
     complete; a mostly unshaped PIRL run is PPO-EWRI under PIRL's name, so it says so."""
     final = run.path / "model.zip"
     tmp = run.path / "model.tmp.zip"
-    model.save(tmp)
+    checkpoint.save_model(model, tmp)
     os.replace(tmp, final)
     if stack.pare is not None:
         from pirl.agents.pirl_advice import unshaped_warning

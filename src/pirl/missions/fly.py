@@ -2,7 +2,8 @@
 in the PyFlyt backend, with wind.
 
 Nothing of the episode the mission was written from is used: the ``.plan`` files (one per
-sortie, in order) are read from disk, every waypoint's latitude, longitude and altitude is
+sortie, in order, as ``summary.json`` lists them) are read from disk and checked by
+:mod:`pirl.missions.read`, every waypoint's latitude, longitude and altitude (in its frame) is
 turned back into a grid cell through the same geo-reference the writer used, every gimbal and
 zoom command into a camera setting (the inverse functions of :mod:`pirl.missions.write`),
 and a :class:`FileFollower` flies them as the grid's own actions: one-cell moves towards the
@@ -17,6 +18,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,15 +27,26 @@ from typing import Any
 
 import numpy as np
 
-from pirl.config.errors import ConfigError
+from pirl.config.errors import ConfigError, UserError
 from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
+from pirl.missions.read import (
+    GOTO,
+    MissionFile,
+    MissionItem,
+    dialect,
+    disagreement,
+    read_plan,
+    read_waypoints,
+    role,
+)
 from pirl.missions.write import (
     Geo,
+    file_digest,
     geo_for,
-    mav,
     pan_from_yaw,
+    pid_alive,
     tilt_from_pitch,
     zoom10_from_percent,
 )
@@ -61,7 +74,9 @@ class Op:
 
 @dataclass
 class FlightFiles:
-    """A mission folder read back: its summary, world, the ops of its sorties in order."""
+    """A mission folder read back: its summary, world, the ops of its sorties in order, the
+    items not flown (MAVLink name: count) and one line per warning (an edited file, a
+    ``.waypoints`` that disagrees with its ``.plan``)."""
 
     folder: Path
     summary: dict[str, Any]
@@ -70,38 +85,140 @@ class FlightFiles:
     ops: list[Op]
     plans: list[str]
     items: int
+    skipped: dict[str, int] = dataclasses.field(default_factory=dict)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    edited: list[str] = dataclasses.field(default_factory=list)
 
 
-def _plan_files(folder: Path) -> list[Path]:
-    one = folder / "mission.plan"
-    if one.is_file():
-        return [one]
-    parts = sorted(folder.glob("sortie-*.plan"), key=lambda p: int(p.stem.split("-")[1]))
-    if not parts:
-        raise ConfigError(f"{folder}: no mission.plan or sortie-N.plan (not a pirl plan folder)")
-    return parts
+def sortie_names(count: int) -> list[str]:
+    """The file stems of a mission of ``count`` sorties, in flying order."""
+    return ["mission"] if count == 1 else [f"sortie-{n}" for n in range(1, count + 1)]
 
 
-def _cell(geo: Geo, lat: float, lon: float, alt: float, size: tuple[int, ...]) -> Cell:
+def _plan_files(folder: Path, summary: dict[str, Any], summary_file: Path) -> list[Path]:
+    """The sorties ``summary.json`` lists, all present, in order; a stray plan is refused."""
+    count = summary.get("sorties")
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise UserError(f"{summary_file}, sorties: {count!r} is not a count of sorties")
+    names = sortie_names(count)
+    missing = [f"{n}.plan" for n in names if not (folder / f"{n}.plan").is_file()]
+    if missing:
+        raise UserError(
+            f"{folder}: summary.json lists {count} sortie(s) but {', '.join(missing)} "
+            f"{'is' if len(missing) == 1 else 'are'} missing; nothing flown (restore the "
+            "file or write the mission again)"
+        )
+    stray = sorted(
+        p.name for p in [*folder.glob("sortie-*.plan"), *folder.glob("mission.plan")]
+        if p.stem not in names
+    )  # fmt: skip
+    if stray:
+        raise UserError(
+            f"{folder}: {', '.join(stray)} is not among the {count} sortie(s) summary.json "
+            "lists; nothing flown"
+        )
+    return [folder / f"{n}.plan" for n in names]
+
+
+def _edited(folder: Path, summary: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """(files changed or gone since ``pirl plan`` wrote them, the warning lines)."""
+    sums = summary.get("checksums")
+    if not isinstance(sums, dict):
+        return [], ["summary.json holds no checksums (an older pirl plan): an edited file "
+                    "cannot be told from a written one"]  # fmt: skip
+    changed, gone = [], []
+    for name, digest in sorted(sums.items()):
+        path = folder / str(name)
+        if "/" in str(name) or not path.is_file():
+            gone.append(str(name))
+        elif file_digest(path) != digest:
+            changed.append(str(name))
+    lines = []
+    if changed:
+        them = "it" if len(changed) == 1 else "them"
+        lines.append(
+            f"{', '.join(changed)} changed since pirl plan wrote {them} (checksum in "
+            "summary.json): this check is of the edited mission"
+        )
+    if gone:
+        lines.append(f"{', '.join(gone)} missing (summary.json lists it)")
+    return changed + gone, lines
+
+
+def _cell(geo: Geo, lat: float, lon: float, alt: float, size: tuple[int, ...], where: str) -> Cell:
     x, y = geo.georef.cells_from_lonlat(np.array([lon]), np.array([lat]))
+    if not (math.isfinite(x[0]) and math.isfinite(y[0])):
+        raise UserError(f"{where}, position: lat {lat:.7f}, lon {lon:.7f} is off the grid's map")
     cell = (int(math.floor(x[0])), int(math.floor(y[0])), round(alt / geo.level_m) - 1)
     if not all(0 <= c < s for c, s in zip(cell, size, strict=True)):
-        raise ConfigError(
-            f"waypoint at lat {lat:.7f}, lon {lon:.7f}, {alt:g} m lies outside the "
-            f"{'x'.join(map(str, size))} world the mission was written for"
+        raise UserError(
+            f"{where}, position: lat {lat:.7f}, lon {lon:.7f}, {alt:g} m above home lies "
+            f"outside the {'x'.join(map(str, size))} world the mission was written for"
         )
     return cell
 
 
+def above_home(item: MissionItem, home: tuple[float, float, float], where: str) -> float:
+    """A flown position's altitude above home, metres, from its frame: relative (3) as it is,
+    above sea level (0) less home's altitude (``plannedHomePosition``, above sea level);
+    above terrain (10) needs a ground model, which no site carries yet."""
+    m = dialect()
+    alt = item.params[6]
+    if item.frame == m.MAV_FRAME_GLOBAL_RELATIVE_ALT:
+        return alt
+    if item.frame == m.MAV_FRAME_GLOBAL:
+        return alt - home[2]
+    raise UserError(
+        f"{where}, frame: {item.frame} (above terrain) needs the site's ground model, and "
+        "pirl sites carry none yet; write it relative to home (3) or above sea level (0)"
+    )
+
+
+def mission_ops(
+    mission: MissionFile, geo: Geo, size: tuple[int, ...], camera: list[int]
+) -> tuple[list[Op], dict[str, int]]:
+    """A checked mission file as ops (``camera`` is the setting so far, updated), and the
+    items not flown (MAVLink name: count). A position outside the world is refused."""
+    m = dialect()
+    ops: list[Op] = []
+    skipped: dict[str, int] = {}
+    for item in mission.items:
+        p, cmd = item.params, item.command
+        where = f"{mission.path}: item {item.index} ({item.name})"
+        kind = role(cmd)
+        if kind != "flown":
+            if kind == "skipped":
+                skipped[item.name] = skipped.get(item.name, 0) + 1
+            continue
+        if cmd in GOTO:
+            alt = above_home(item, mission.home, where)
+            ops.append(Op("goto", cell=_cell(geo, p[4], p[5], alt, size, where)))
+            continue
+        if cmd == m.MAV_CMD_SET_CAMERA_ZOOM:
+            camera[2] = zoom10_from_percent(p[1])
+        else:
+            # NaN (null): the angle stays as it is.
+            yaw = p[1] if cmd == m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW else p[2]
+            if not math.isnan(p[0]):
+                camera[0] = tilt_from_pitch(p[0])
+            if not math.isnan(yaw):
+                camera[1] = pan_from_yaw(yaw)
+        ops.append(Op("camera", camera=(camera[0], camera[1], camera[2])))
+    return ops, skipped
+
+
 def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
-    """Read a ``pirl plan`` folder: ``summary.json`` for the world, the ``.plan`` files for
-    what to fly. Bad or foreign files are refused in one line."""
+    """Read a ``pirl plan`` folder: ``summary.json`` for the world and the sorties, every
+    ``.plan`` for what to fly, each ``.waypoints`` checked against its ``.plan``. Bad, foreign
+    or missing files are refused in one line; edits and disagreements are warnings."""
     folder = Path(folder)
     summary_file = folder / "summary.json"
     if not summary_file.is_file():
         raise ConfigError(f"{folder}: no summary.json (not a folder written by pirl plan)")
     try:
         summary = json.loads(summary_file.read_text())
+        if not isinstance(summary, dict):
+            raise TypeError("not an object")
         if "env" not in summary:
             raise ConfigError(
                 f"{summary_file}: no grid settings (written by an older pirl plan); write the "
@@ -109,57 +226,46 @@ def read_flight(folder: str | os.PathLike[str]) -> FlightFiles:
             )
         env = VCPPConfig.from_dict(summary["env"])
         settings = MissionSettings.from_dict(summary.get("mission", {}))
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
         raise ConfigError(
             f"{summary_file}: unreadable ({exc}); write the mission again with pirl plan"
         ) from None
     if env.site and not Path(env.site).exists():
         raise ConfigError(f"{summary_file}: its site {env.site} is not there (run from where "
                           "pirl plan ran, or copy the site back)")  # fmt: skip
-    m = mav()
-    size = env.size
-    geo: Geo | None = None
+    plans = _plan_files(folder, summary, summary_file)
+    edited, warnings = _edited(folder, summary)
+    # The writer's geo-reference places the world's cells on the Earth; each file's home gives
+    # only the height that positions above sea level are measured from.
+    geo = geo_for(env, settings, (0, 0, 0))
     ops: list[Op] = []
-    start: Cell | None = None
+    skipped: dict[str, int] = {}
     camera = [0, 0, 10]
     items = 0
-    plans = _plan_files(folder)
     for path in plans:
-        try:
-            plan = json.loads(path.read_text())
-            simple = plan["mission"]["items"]
-            home = plan["mission"]["plannedHomePosition"]
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
-            raise ConfigError(f"{path}: not a QGroundControl plan ({exc})") from None
-        if geo is None:
-            # The writer's geo-reference; its home is only a label here.
-            geo = geo_for(env, settings, (0, 0, 0))
-            geo.home = (float(home[0]), float(home[1]))
-        for item in simple:
-            items += 1
-            cmd = item.get("command")
-            p = [float("nan") if v is None else float(v) for v in item.get("params", [])]
-            if len(p) != 7:
-                raise ConfigError(f"{path}: item {item.get('doJumpId')} has no 7 params")
-            if cmd in (m.MAV_CMD_NAV_TAKEOFF, m.MAV_CMD_NAV_WAYPOINT):
-                cell = _cell(geo, p[4], p[5], p[6], size)
-                if start is None:
-                    start = cell
-                ops.append(Op("goto", cell=cell))
-            elif cmd == m.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW:
-                camera[:2] = [tilt_from_pitch(p[0]), pan_from_yaw(p[1])]
-                ops.append(Op("camera", camera=(camera[0], camera[1], camera[2])))
-            elif cmd == m.MAV_CMD_DO_MOUNT_CONTROL:
-                camera[:2] = [tilt_from_pitch(p[0]), pan_from_yaw(p[2])]
-                ops.append(Op("camera", camera=(camera[0], camera[1], camera[2])))
-            elif cmd == m.MAV_CMD_SET_CAMERA_ZOOM:
-                camera[2] = zoom10_from_percent(p[1])
-                ops.append(Op("camera", camera=(camera[0], camera[1], camera[2])))
-            # IMAGE_START_CAPTURE, DO_SET_CAM_TRIGG_DIST: photos; the camera's view is booked
-            # at every cell anyway. RETURN_TO_LAUNCH: the way home covers nothing new.
+        mission = read_plan(path)
+        other = path.with_suffix(".waypoints")
+        if other.is_file():
+            differ = disagreement(mission, read_waypoints(other))
+            if differ:
+                warnings.append(
+                    f"{other.name} disagrees with {path.name} ({differ}); the flight is of "
+                    f"{path.name}"
+                )
+        items += len(mission.items)
+        part, left = mission_ops(mission, geo, env.size, camera)
+        ops += part
+        for name, count in left.items():
+            skipped[name] = skipped.get(name, 0) + count
+    start = next((op.cell for op in ops if op.kind == "goto"), None)
     if start is None:
         raise ConfigError(f"{folder}: its plan has no take-off or waypoint")
-    return FlightFiles(folder, summary, env, start, ops, [p.name for p in plans], items)
+    return FlightFiles(
+        folder, summary, env, start, ops, [p.name for p in plans], items, skipped, warnings,
+        edited,
+    )  # fmt: skip
 
 
 class FileFollower:
@@ -288,6 +394,10 @@ def fly_files(
         "steps": int(m["steps"]),
         "grid_steps": s.get("grid_steps"),
         "ops_skipped": follower.skipped,
+        # Items read and not flown (DO_JUMP, LOITER, ...): MAVLink name and count.
+        "items_skipped": dict(files.skipped),
+        "edited": list(files.edited),
+        "warnings": list(files.warnings),
         "sim_seconds": round(float(m["sim_seconds"]), 1),
         "wall_seconds": round(wall, 1),
         "timeouts": int(m["timeouts"]),
@@ -316,7 +426,13 @@ def fly_mission(
 
 def _write(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically, with the permissions of any new file (a temporary
-    file of mkstemp's would keep its owner-only mode)."""
+    file of mkstemp's would keep its owner-only mode). A temporary left by a killed writer
+    (its process gone) is removed first."""
+    stale = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.tmp$")
+    for old in path.parent.glob(f".{path.name}.*.tmp"):
+        found = stale.match(old.name)
+        if found and not pid_alive(int(found.group(1))):
+            old.unlink(missing_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text)
     os.replace(tmp, path)

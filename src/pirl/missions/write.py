@@ -5,7 +5,9 @@ camera commands where the camera changes, waypoints (straight runs of moves with
 camera merged into one leg, photos triggered by distance along it), an image capture wherever
 a view adds cells, return to launch; split into sorties that each fit one battery and
 ``mission.max_items``. Files: QGroundControl ``.plan`` (JSON), ``QGC WPL 110`` ``.waypoints``
-(written by pymavlink's ``mavwp``), ``path.geojson``, ``path.kml`` and ``summary.json``.
+(``mavwp``'s layout, 8 decimals of a degree), ``path.geojson``, ``path.kml`` and
+``summary.json`` (with a checksum of every other file), staged beside ``--out`` and renamed
+into place whole.
 Every MAVLink number comes from pymavlink's dialect. Axes and angles: docs/missions.md.
 """
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -28,6 +31,13 @@ from pirl.config.mission import DEFAULT_ORIGIN, MissionSettings
 from pirl.config.world import VCPPConfig
 
 NAN = float("nan")
+
+
+def file_digest(path: Path) -> str:
+    """``sha256:HEX`` of a file's bytes (the checksums ``summary.json`` keeps)."""
+    import hashlib
+
+    return "sha256:" + hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def mav() -> Any:
@@ -375,18 +385,18 @@ def plan_json(items: list[dict[str, Any]], geo: Geo, s: MissionSettings, fences:
 
 
 def write_waypoints(path: Path, items: list[dict[str, Any]], geo: Geo) -> None:
-    """``QGC WPL 110``: home first (seq 0), then the items, written by pymavlink's mavwp."""
-    from pymavlink import mavutil, mavwp
-
-    loader = mavwp.MAVWPLoader()
+    """``QGC WPL 110``: home first (seq 0, above sea level), then the items, in the tab layout
+    of pymavlink's ``mavwp`` with 8 decimals of a degree (1 mm; ``mavwp.save``'s 6 are 11 cm,
+    and the ``.plan`` and the ``.waypoints`` of one mission agree within a centimetre)."""
     m = mav()
-    msg = mavutil.mavlink.MAVLink_mission_item_message
-    loader.add(msg(1, 1, 0, m.MAV_FRAME_GLOBAL, m.MAV_CMD_NAV_WAYPOINT, 1, 1,
-                   0, 0, 0, 0, geo.home[0], geo.home[1], 0.0))  # fmt: skip
-    for n, it in enumerate(items, start=1):
-        p = it["params"]
-        loader.add(msg(1, 1, n, it["frame"], it["command"], 0, 1, *p))
-    loader.save(str(path))
+    rows = [(0, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_NAV_WAYPOINT,
+             [0.0, 0.0, 0.0, 0.0, geo.home[0], geo.home[1], 0.0])]  # fmt: skip
+    rows += [(n, 0, it["frame"], it["command"], it["params"]) for n, it in enumerate(items, 1)]
+    lines = ["QGC WPL 110"]
+    for seq, current, frame, command, p in rows:
+        cols = [f"{v:.6f}" for v in p[:4]] + [f"{p[4]:.8f}", f"{p[5]:.8f}", f"{p[6]:.6f}"]
+        lines.append("\t".join([str(seq), str(current), str(frame), str(command), *cols, "1"]))
+    path.write_text("\n".join(lines) + "\n")
 
 
 # -- geodata ----------------------------------------------------------------------------------
@@ -471,6 +481,49 @@ def kml(features: dict, name: str, description: str) -> str:
     return env.from_string(KML).render(name=name, description=description, features=polys)
 
 
+# -- writing a folder whole ------------------------------------------------------------------
+def pid_alive(pid: int) -> bool:
+    """Whether a process of this id runs on this machine (one of another user's counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def _host() -> str:
+    """This machine's name as a staging folder carries it (letters and digits only)."""
+    import socket
+
+    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:32] or "host"
+
+
+STAGING = re.compile(r"^\..+\.staging-(?P<host>[A-Za-z0-9]*)-(?P<pid>[0-9]+)-[A-Za-z0-9_]+$")
+"""A folder ``pirl plan`` writes into before renaming it to ``--out``: ``.NAME.staging-HOST-
+PID-RANDOM``, beside ``--out`` (a rename within one file system is atomic)."""
+
+
+def remove_stale_staging(parent: Path) -> list[Path]:
+    """Remove the staging folders in ``parent`` whose writer, on this machine, is gone (a
+    ``pirl plan`` killed mid-write); a running writer's, or another machine's, stay."""
+    removed: list[Path] = []
+    host = _host()
+    try:
+        entries = list(parent.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        found = STAGING.match(entry.name)
+        if not found or found["host"] != host or pid_alive(int(found["pid"])):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
+
+
 # -- the command ------------------------------------------------------------------------------
 def mission_source(
     env: VCPPConfig,
@@ -553,7 +606,11 @@ def write_mission(
     parts = sorties(items, ep, geo, settings)
     fence = fences(cfg, geo)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    # A run killed mid-write leaves its staging folder: the next run into this parent clears it.
+    remove_stale_staging(out.parent)
+    tmp = Path(
+        tempfile.mkdtemp(prefix=f".{out.name}.staging-{_host()}-{os.getpid()}-", dir=out.parent)
+    )
     umask = os.umask(0)
     os.umask(umask)
     tmp.chmod(0o777 & ~umask)  # a folder like any other, not mkdtemp's owner-only one
@@ -583,6 +640,8 @@ def write_mission(
             "gimbal": gimbal,
             "sorties": len(parts),
             "files": sorted(p.name for p in tmp.iterdir()),
+            # pirl fly names a file edited after writing (docs/missions.md).
+            "checksums": {p.name: file_digest(p) for p in sorted(tmp.iterdir())},
             "items_per_sortie": [len(p.items) for p in parts],
             "items_before_merging": len(unmerged) + 2,
             "items_after_merging": len(items) + 2,
@@ -622,6 +681,7 @@ __all__ = [
     "mission_source",
     "pan_from_yaw",
     "record_episode",
+    "remove_stale_staging",
     "sorties",
     "tilt_from_pitch",
     "write_mission",

@@ -72,6 +72,10 @@ class GeoRef:
         return np.asarray(lon), np.asarray(lat)
 
 
+_CELLS = GeoRef("", 0.0, 0.0, 1.0)
+"""A geo-reference of cell units only: extents of what was given in cells."""
+
+
 @functools.lru_cache(maxsize=16)
 def _transformer(src: str, dst: str) -> Any:
     """One pyproj transformer per pair of CRSs: building one takes milliseconds, and a
@@ -384,19 +388,38 @@ def _polygon_mask(
     import shapely
 
     value = getattr(s, key) if key != "start" else s.start["zone"]
-    geom = read_polygons(folder / value, key)
+    written = read_polygons(folder / value, key)
+    geom = written
     if georef.real:
         geom = shapely.transform(geom, lambda xy: np.stack(georef.cells_from_lonlat(*xy.T), 1))
     xs, ys = np.meshgrid(np.arange(shape[0]) + 0.5, np.arange(shape[1]) + 0.5, indexing="ij")
     mask = shapely.contains_xy(geom, xs.ravel(), ys.ravel()).reshape(shape)
     if not mask.any():
-        where = "in cell units" if not georef.real else "in longitude/latitude"
-        bounds = ", ".join(f"{v:.6g}" for v in geom.bounds)
+        # Both extents in the file's own coordinates: GeoJSON's longitude/latitude on a
+        # georeferenced site, cell units on one without a CRS.
         raise ConfigError(
-            f"site.{key}: {value} covers no cell of the {shape[0]} x {shape[1]} grid "
-            f"(its bounds {bounds} {where}); it lies outside the raster"
+            f"site.{key}: {value} covers no cell of the {shape[0]} x {shape[1]} grid: it spans "
+            f"{_extent(written.bounds, georef)}, the grid {_grid_extent(georef, shape)}"
         )
     return mask
+
+
+def _extent(bounds: tuple[float, ...], georef: GeoRef) -> str:
+    """(min x, min y, max x, max y) in words: lon/lat on a georeferenced site, else cells."""
+    x0, y0, x1, y1 = bounds
+    if georef.real:
+        return f"lon {x0:.6f} to {x1:.6f}, lat {y0:.6f} to {y1:.6f} (WGS84 degrees)"
+    return f"x {x0:.6g} to {x1:.6g}, y {y0:.6g} to {y1:.6g} (cell units)"
+
+
+def _grid_extent(georef: GeoRef, shape: tuple[int, ...]) -> str:
+    """The grid's extent in the words of :func:`_extent` (its corners' lon/lat, or cells)."""
+    if not georef.real:
+        return _extent((0.0, 0.0, float(shape[0]), float(shape[1])), georef)
+    xs = np.array([0.0, shape[0], 0.0, shape[0]])
+    ys = np.array([0.0, 0.0, shape[1], shape[1]])
+    lon, lat = georef.lonlat_from_cells(xs, ys)
+    return _extent((lon.min(), lat.min(), lon.max(), lat.max()), georef)
 
 
 # -- starts -------------------------------------------------------------------------------
@@ -424,7 +447,11 @@ def _starts(
             )
             x, y = int(math.floor(cx[0])), int(math.floor(cy[0]))
         if not (0 <= x < sx and 0 <= y < sy):
-            raise ConfigError(f"site.start={s.start!r} lies outside the {sx} x {sy} grid")
+            # In the coordinates it was given in: cells, or latitude/longitude.
+            raise ConfigError(
+                f"site.start={s.start!r} lies outside the {sx} x {sy} grid, which spans "
+                f"{_grid_extent(georef if kind == 'latlon' else _CELLS, (sx, sy))}"
+            )
         free = np.flatnonzero(~blocked[x, y])
         if not free.size:
             what = "a no-fly zone" if no_fly[x, y] else "a building (blocked at every level)"
