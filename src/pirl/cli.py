@@ -891,7 +891,7 @@ def site_check(
     Exits 0 when at least one coverable cell can be seen, 1 otherwise."""
     import json
 
-    from pirl.evaluate import site_check as sc
+    from pirl.missions import site_check as sc
 
     env = _run_config(config).env if config else None
     found, seen, report = sc.check_site(site, env)
