@@ -30,8 +30,12 @@ from pirl.missions.fly import mission_ops
 from pirl.missions.write import geo_for, mission_source, remove_stale_staging, write_mission
 
 ROOT = Path(__file__).resolve().parents[1]
+# 300 cases a file type in `make test`; PIRL_FUZZ_EXAMPLES=2000 for a longer search.
 FUZZ = settings(
-    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None
+    max_examples=int(os.environ.get("PIRL_FUZZ_EXAMPLES", "300")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+    database=None,
 )
 
 

@@ -330,6 +330,7 @@ def test_an_area_or_start_off_a_georeferenced_grid_is_named_in_degrees(tmp_path:
     assert "spans lon 11.600000 to 11.610000, lat 48.200000 to 48.210000 (WGS84" in line, line
     grid = r"the grid lon 11\.570000 to 11\.5713\d+, lat 48\.150000 to 48\.1508\d+ \(WGS84"
     assert re.search(grid, line), line
+    one_error_line(pirl("site", "check", str(area)), "spans lon 11.600000 to 11.610000")
     start = write_site(tmp_path / "start", h, cell_size_m=10.0, origin=[48.15, 11.57],
                        start={"lat": 48.3, "lon": 11.57})  # fmt: skip
     with pytest.raises(ConfigError, match=r"lies outside the 10 x 10 grid, which spans lon 11\.5"):
