@@ -16,12 +16,15 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Span:
     """A piece of a cell: plain, bold or italic text, or a link to ``href`` (a path relative
-    to the report folder, or ``#anchor``)."""
+    to the report folder, or ``#anchor``). ``short``: what the HTML page shows instead of
+    ``text`` (a method's display name; the full ``text`` is its hover title and the legend's),
+    while Markdown keeps ``text``."""
 
     text: str
     bold: bool = False
     italic: bool = False
     href: str | None = None
+    short: str | None = None
 
 
 Cell = str | Span | tuple[Span, ...]
@@ -32,10 +35,11 @@ Cell = str | Span | tuple[Span, ...]
 class Table:
     """One titled block of the report: paragraphs (``intro``), a table of ``rows`` under
     ``header`` (no table without a header), paragraphs after it (``notes``) and a bullet list.
-    ``level``: the heading's level; ``anchor``: the heading's id in the HTML page."""
+    ``level``: the heading's level; ``anchor``: the heading's id in the HTML page (and, for
+    a titled table, ``<anchor>-table`` the table's, ``<anchor>-list`` the list's)."""
 
     title: str = ""
-    header: Sequence[str] = ()
+    header: Sequence[Cell] = ()
     rows: Sequence[Sequence[Cell]] = ()
     intro: Sequence[str] = ()
     notes: Sequence[str] = ()
@@ -46,6 +50,10 @@ class Table:
     def span_rows(self) -> list[list[tuple[Span, ...]]]:
         """The rows with every cell as its spans (what a renderer walks)."""
         return [[spans(cell) for cell in row] for row in self.rows]
+
+    def span_header(self) -> list[tuple[Span, ...]]:
+        """The header with every name as its spans (a column may be named by a method)."""
+        return [spans(cell) for cell in self.header]
 
 
 def spans(cell: Cell) -> tuple[Span, ...]:
@@ -64,7 +72,9 @@ def render_markdown(tables: Iterable[Table]) -> str:
         for text in table.intro:
             lines += [text, ""]
         if table.header:
-            lines.append(_markdown_row(table.header))
+            lines.append(
+                _markdown_row("".join(map(_markdown_span, c)) for c in table.span_header())
+            )
             lines.append("|" + "---|" * len(table.header))
             for row in table.span_rows():
                 lines.append(_markdown_row("".join(map(_markdown_span, c)) for c in row))
