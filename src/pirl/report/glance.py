@@ -146,7 +146,7 @@ def _words(line: str) -> int:
     return len(line.split())
 
 
-def _shortest_fit(candidates: list[str]) -> str:
+def _most_detailed_fit(candidates: list[str]) -> str:
     """The first (most detailed) candidate within :data:`MAX_WORDS`, else the last."""
     return next((c for c in candidates if _words(c) <= MAX_WORDS), candidates[-1])
 
@@ -232,7 +232,7 @@ def _verdict_finding(
         f"The {len(held)} PIRL variants each beat {_span(wins, str)} of {compared} methods "
         f"everywhere and lose to {_span(losses, str)}{tail}"
     )
-    return _shortest_fit([
+    return _most_detailed_fit([
         said("worlds"), said("count"), said("bare"),
         "; ".join(counted(pirl) for pirl in held) + tail, overall,
     ])  # fmt: skip
@@ -277,7 +277,7 @@ def _planner_finding(rows: list[dict[str, Any]], act: str, names: Mapping[str, s
             + f"; {numbers}."
         )
     coarse = f"Best learned method per world against the planner: {numbers}."
-    return _shortest_fit([detailed, coarse])
+    return _most_detailed_fit([detailed, coarse])
 
 
 def _advice_finding(advisor_stats: Mapping[str, Any] | None) -> str | None:
@@ -289,7 +289,7 @@ def _advice_finding(advisor_stats: Mapping[str, Any] | None) -> str | None:
     per_run = ", ".join(f"{name} {share:.0%}" for name, share in shares.items())
     tail = "; an unshaped step trains as PPO-EWRI."
     ranged = _span(list(shares.values()), "{:.0%}".format)
-    return _shortest_fit([
+    return _most_detailed_fit([
         f"Advice shaped {per_run} of training steps{tail}",
         f"Advice shaped {ranged} of each PIRL run's training steps ({len(shares)} runs: "
         f"advice table){tail}",
