@@ -28,7 +28,7 @@ from pirl.pare.stats import RunStats
 from pirl.report.figures import BAR_FIGURES, bar_figure, interval_figure, learning_curves
 from pirl.report.glance import act_rows as _act_rows
 from pirl.report.glance import findings, headline_table, summary_lines
-from pirl.report.names import display_names, legend_table, name_span
+from pirl.report.names import display_names, legend_table, name_cell
 from pirl.report.physics import physics_gap_table
 from pirl.report.tables import Cell, Span, Table, render_markdown
 
@@ -137,7 +137,7 @@ def paper_tables(
                 body.append(rule)
             first = next(by[(method, s)] for s in sizes if (method, s) in by)
             cells: list[Cell] = [
-                name_span(first["label"], names.get(method)),
+                name_cell(first["label"], names.get(method)),
                 str(int(first.get("seeds", 1))),
             ]
             for size in sizes:
@@ -200,7 +200,7 @@ def camera_table(
     )  # fmt: skip
     body = []
     for r in order:
-        cells: list[Cell] = [name_span(r["label"], names.get(r["method"]))]
+        cells: list[Cell] = [name_cell(r["label"], names.get(r["method"]))]
         cells += [r.get("act", ""), r["size"], _stat(r, "vcr")]
         cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
         steps = r.get("steps_mean", math.nan)
@@ -257,7 +257,7 @@ def advice_table(
         )
         spent = s.get("budget_exhausted_at_step", -1)
         body.append([
-            name, name_span(label, (short_of_label or {}).get(label)),
+            name, name_cell(label, (short_of_label or {}).get(label)),
             f"{run.share(run.student):.0%}", f"{run.share(run.teacher):.0%}",
             f"{run.share(run.unshaped):.0%}", f"{s.get('mean_staleness', 0.0):.1f}",
             f"{s.get('teacher_calls_per_step', 0.0):.4f}", agreement,
@@ -329,9 +329,9 @@ def improvement_table(
         cell[f["other"]] = f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
     return Table(
         f"Probability of improvement in VCR (act {act}; runs = training seeds)",
-        ["PIRL", "sim", "size", *(name_span(o, short[o]) for o in others)],
+        ["PIRL", "sim", "size", *(name_cell(o, short[o]) for o in others)],
         [
-            [name_span(pirl, short[pirl]), sim, size, *(row.get(o, "—") for o in others)]
+            [name_cell(pirl, short[pirl]), sim, size, *(row.get(o, "—") for o in others)]
             for (pirl, sim, size), row in cells.items()
         ],
         intro=[

@@ -18,7 +18,7 @@ import numpy as np
 from pirl.agents.methods import is_advised_key, is_planner, report_order
 from pirl.evaluate.summary import BOOTSTRAP_REPS, size_key
 from pirl.pare.stats import RunStats
-from pirl.report.names import name_span
+from pirl.report.names import name_cell
 from pirl.report.tables import Cell, Table
 
 MAX_WORDS = 30
@@ -91,13 +91,13 @@ def headline_table(
     for r in records:
         if r.get("sim") == "grid" and r.get("act", "greedy") in (act, "fixed"):
             episodes[(r["method"], r["size"])].append(r)
-    head: list[Cell] = ["method"]
+    head = ["method"]
     for world in worlds:
         head += [f"{world} VCR", f"{world} steps / planner's"]
     body: list[list[Cell]] = []
     for method in sorted({r["method"] for r in grid}, key=report_order):
         first = next(by[(method, w)] for w in worlds if (method, w) in by)
-        cells: list[Cell] = [name_span(first["label"], names.get(method))]
+        cells: list[Cell] = [name_cell(first["label"], names.get(method))]
         for world in worlds:
             row = by.get((method, world))
             if row is None:

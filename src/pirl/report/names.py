@@ -15,7 +15,7 @@ from typing import Any
 
 from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
 from pirl.agents.methods import METHODS, is_advised_key, report_order
-from pirl.report.tables import Span, Table
+from pirl.report.tables import Named, Span, Table
 
 _UNSHAPED = re.compile(r"unshaped \d+%")
 # Advisors that are not an LLM: a method played by asking one must not pass as an LLM's.
@@ -66,9 +66,9 @@ def display_names(rows: Iterable[Mapping[str, Any]]) -> dict[str, str]:
     return names
 
 
-def name_span(label: str, short: str | None) -> Span:
+def name_cell(label: str, short: str | None) -> str:
     """A method's cell: its full label, shown as ``short`` on the page (None: the label)."""
-    return Span(label, short=short if short and short != label else None)
+    return Named(label, short) if short and short != label else label
 
 
 def legend_table(rows: Iterable[Mapping[str, Any]], names: Mapping[str, str]) -> Table:
@@ -94,4 +94,4 @@ def legend_table(rows: Iterable[Mapping[str, Any]], names: Mapping[str, str]) ->
     )
 
 
-__all__ = ["display_names", "legend_table", "name_span"]
+__all__ = ["display_names", "legend_table", "name_cell"]

@@ -27,8 +27,21 @@ class Span:
     short: str | None = None
 
 
+class Named(str):
+    """A method's full label that the HTML page shows by its short name (``short``; the full
+    label is the hover title and the legend's). Everything else reads the label: it is the
+    ``str`` (table.md, a test comparing a cell with a label)."""
+
+    short: str
+
+    def __new__(cls, label: str, short: str) -> Named:
+        named = super().__new__(cls, label)
+        named.short = short
+        return named
+
+
 Cell = str | Span | tuple[Span, ...]
-"""A table cell: plain text, one span, or spans side by side."""
+"""A table cell: plain text (or :class:`Named`), one span, or spans side by side."""
 
 
 @dataclass(frozen=True)
@@ -39,7 +52,7 @@ class Table:
     a titled table, ``<anchor>-table`` the table's, ``<anchor>-list`` the list's)."""
 
     title: str = ""
-    header: Sequence[Cell] = ()
+    header: Sequence[str] = ()
     rows: Sequence[Sequence[Cell]] = ()
     intro: Sequence[str] = ()
     notes: Sequence[str] = ()
@@ -52,12 +65,14 @@ class Table:
         return [[spans(cell) for cell in row] for row in self.rows]
 
     def span_header(self) -> list[tuple[Span, ...]]:
-        """The header with every name as its spans (a column may be named by a method)."""
+        """The header with every name as its spans (a method names a column: :class:`Named`)."""
         return [spans(cell) for cell in self.header]
 
 
 def spans(cell: Cell) -> tuple[Span, ...]:
     """A cell as its spans."""
+    if isinstance(cell, Named):
+        return (Span(str(cell), short=cell.short),)
     if isinstance(cell, str):
         return (Span(cell),)
     return (cell,) if isinstance(cell, Span) else cell
@@ -105,4 +120,4 @@ def _markdown_span(span: Span) -> str:
     return f"[{text}]({href})"
 
 
-__all__ = ["Cell", "Span", "Table", "render_markdown", "spans"]
+__all__ = ["Cell", "Named", "Span", "Table", "render_markdown", "spans"]
