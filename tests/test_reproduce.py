@@ -4,19 +4,15 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
 
 from pirl.config.run import RunConfig
 from pirl.reproduce.pipeline import reproduce
+from report_view import check_first_screen, render
 
 ROOT = Path(__file__).resolve().parents[1]
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-
-
 SECRET = "sk-test-do-not-leak-4242"
 
 
@@ -62,27 +58,27 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
 
 def test_report_renders_in_headless_chromium(reproduced, tmp_path):
     _, _, report, _ = reproduced
-    assert CHROMIUM, "headless Chromium is needed (Debian package chromium; make test installs it)"
-    dom = subprocess.run(
-        [
-            CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-            "--no-first-run", "--disable-background-networking", "--disable-component-update",
-            "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}",
-            "--virtual-time-budget=10000", "--dump-dom", report.as_uri(),
-        ],
-        capture_output=True, text=True, timeout=120,
-    ).stdout  # fmt: skip
+    # At 1280x800, with a script that measures the first screen (a copy of the page).
+    dom = render(report, tmp_path, measure=True)
     match = re.search(r'data-images="(\d+)/(\d+)"', dom)
     assert match, "the page's load script did not run"
     loaded, total = map(int, match.groups())
     assert total >= 8 and loaded == total
-    # Read at a glance: the rendered page opens with the generated summary, then the
-    # interval figure, then the tables.
+    # Read at a glance: the rendered page opens with the generated summary (the headline
+    # table, then the findings), then the interval figure, then the tables of results.
     first_h2 = re.search(r"<h2[^>]*>([^<]*)</h2>", dom)
     assert first_h2 and first_h2.group(1) == "Summary"
     summary = dom[dom.index("Summary") : dom.index("<h2", dom.index("Summary"))]
     assert summary.count("<li>") >= 2 and "planner" in summary and "shaped" in summary
-    assert dom.index("Summary") < dom.index('alt="intervals') < dom.index("<table")
+    assert (
+        dom.index("Summary")
+        < dom.index('id="headline-table"')
+        < dom.index('alt="intervals')
+        < dom.index("<h2>Results</h2>")
+    )
+    # The first screen at 1280 px holds the headline table and the findings; no finding
+    # runs past 30 words; no figure is shrunk below its drawn size.
+    check_first_screen(dom)
 
 
 def test_a_second_run_reuses_training_and_gives_the_same_numbers(reproduced, monkeypatch):

@@ -66,6 +66,9 @@ class Method:
     options: tuple[str, ...] = ()
     """The ``pirl train`` options of this method beyond those every method takes (``--out``,
     ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
+    short: str = ""
+    """What the HTML report's tables, findings and figures call it (the label when empty);
+    the page's legend gives the full label once."""
 
     @property
     def plays_alone(self) -> bool:
@@ -129,6 +132,7 @@ METHODS: dict[str, Method] = {
         Method(
             "boustrophedon",
             "boustrophedon (planner)",
+            short="Planner",
             training=PLAYED,
             paper=False,
             policy="pirl.agents.boustrophedon:BoustrophedonPolicy",
@@ -137,6 +141,7 @@ METHODS: dict[str, Method] = {
         Method(
             "random",
             "random",
+            short="Random",
             training=PLAYED,
             paper=False,
             policy="pirl.agents.policy:RandomPolicy",

@@ -106,9 +106,27 @@ def plot(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], path: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from pirl.report.figures import style, width
+
     sizes = list(band)
-    fig, axes = plt.subplots(1, len(sizes), figsize=(4.2 * len(sizes), 3.8), squeeze=False)
-    for ax, size in zip(axes[0], sizes, strict=True):
+    with style():
+        fig, axes = plt.subplots(
+            1, len(sizes), figsize=(width(len(sizes), 3.8), 3.9), squeeze=False
+        )
+        _panels(axes[0], sizes, points, band, act)
+        axes[0][0].legend(loc="lower right")
+        if title:
+            fig.suptitle(title)
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)
+    return path
+
+
+def _panels(axes: Any, sizes: list[str], points: Sequence[CurvePoint],
+            band: dict[str, dict[str, float]], act: str) -> None:  # fmt: skip
+    """One panel per size: PPO-EWRI's band, each advisor's point and interval."""
+    for ax, size in zip(axes, sizes, strict=True):
         b = band[size]
         ax.axhspan(b["iqm_lo"], b["iqm_hi"], color="0.85", label="PPO-EWRI (95% interval)")
         ax.axhline(b["iqm"], color="0.5", lw=1)
@@ -120,19 +138,13 @@ def plot(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], path: 
                 fmt="s" if llm else "o", color="tab:red" if llm else "tab:blue", capsize=3,
             )  # fmt: skip
             short = p.advisor.label.replace(" (not an LLM)", "").replace("oracle, accuracy", "p =")
-            ax.annotate(short[:28], (p.advisor.agreement, p.iqm), fontsize=6,
+            # Short enough to stay beside its point in a panel a third of the page wide.
+            ax.annotate(short[:20], (p.advisor.agreement, p.iqm),
                         xytext=(3, 3), textcoords="offset points")  # fmt: skip
         ax.set_title(f"{size} (act {act})")
         ax.set_xlabel("measured move agreement with the oracle")
         ax.set_xlim(-0.02, 1.05)
         ax.set_ylabel("VCR, IQM over seeds")
-    axes[0][0].legend(loc="lower right", fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def section(points: Sequence[CurvePoint], band: dict[str, dict[str, float]], act: str) -> Table:

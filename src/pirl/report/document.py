@@ -14,18 +14,21 @@ import base64
 import functools
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select_autoescape
 
-from pirl.agents.methods import PAPER_METHODS, is_advised_key, is_planner, report_order
+from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.agents.run_folder import RunFolder
 from pirl.evaluate.summary import honest_label, read_summary, size_key
 from pirl.pare.stats import RunStats
+from pirl.report.figures import BAR_FIGURES, bar_figure, interval_figure, learning_curves
+from pirl.report.glance import act_rows as _act_rows
+from pirl.report.glance import findings, headline_table, summary_lines
+from pirl.report.names import display_names, legend_table, name_cell
 from pirl.report.physics import physics_gap_table
 from pirl.report.tables import Cell, Span, Table, render_markdown
 
@@ -86,12 +89,12 @@ def acts_of(rows: list[dict[str, Any]], headline: str = "stochastic") -> list[st
     return sorted(acts, key=lambda a: a != headline) or ["fixed"]
 
 
-def _act_rows(rows: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
-    """Rows of one act mode, with the built-ins (act ``fixed``), which act the same in both."""
-    return [r for r in rows if r.get("act", "greedy") in (act, "fixed")]
-
-
-def paper_tables(rows: list[dict[str, Any]], act: str, stat: str = "iqm") -> list[Table]:
+def paper_tables(
+    rows: list[dict[str, Any]],
+    act: str,
+    stat: str = "iqm",
+    names: Mapping[str, str] | None = None,
+) -> list[Table]:
     """Tables in the paper's layout for one act mode (one per simulator), the paper's value
     beside ours.
 
@@ -99,8 +102,10 @@ def paper_tables(rows: list[dict[str, Any]], act: str, stat: str = "iqm") -> lis
     ``stat="episode"``: the mean over all episodes ± the per-episode 95% CI (the spread over
     scenarios, seeds pooled). The best of the paper's five methods per column is bold; extras
     (planner, oracle-advised PIRL, PIRL variants, random) follow under a rule and are not
-    ranked.
+    ranked. ``names``: the page's short names (:func:`pirl.report.names.display_names` of
+    ``rows`` when None).
     """
+    names = display_names(rows) if names is None else names
     rows = _act_rows(rows, act)
     what = (
         "IQM over training seeds [stratified bootstrap 95% interval]"
@@ -131,7 +136,10 @@ def paper_tables(rows: list[dict[str, Any]], act: str, stat: str = "iqm") -> lis
             if extras and method == extras[0]:
                 body.append(rule)
             first = next(by[(method, s)] for s in sizes if (method, s) in by)
-            cells: list[Cell] = [first["label"], str(int(first.get("seeds", 1)))]
+            cells: list[Cell] = [
+                name_cell(first["label"], names.get(method)),
+                str(int(first.get("seeds", 1))),
+            ]
             for size in sizes:
                 row = by.get((method, size))
                 paper = PAPER.get(sim, {}).get(method, {}).get(size)
@@ -161,14 +169,18 @@ CAMERA = (
 )  # fmt: skip
 
 
-def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
+def camera_table(
+    rows: list[dict[str, Any]], sim: str = "grid", names: Mapping[str, str] | None = None
+) -> Table | None:
     """Camera use beside coverage: per method, size and act mode, the share of camera
     actions, mean footprint, final tilt and zoom, steps, steps relative to the planner's on
     the same scenarios (mean steps over mean planner steps), VCR per 100 steps and the episodes
     that ended in a loop (their last 60 steps in fewer than 10 cells), and where the env's stall
-    guard chose any action, the share of steps it chose; None without rows of ``sim``."""
+    guard chose any action, the share of steps it chose; None without rows of ``sim``.
+    ``names``: the page's short names (of ``rows`` when None)."""
     from pirl.agents.boustrophedon import BoustrophedonPolicy
 
+    names = display_names(rows) if names is None else names
     sim_rows = [r for r in rows if r["sim"] == sim]
     if not sim_rows:
         return None
@@ -188,7 +200,8 @@ def camera_table(rows: list[dict[str, Any]], sim: str = "grid") -> Table | None:
     )  # fmt: skip
     body = []
     for r in order:
-        cells = [r["label"], r.get("act", ""), r["size"], _stat(r, "vcr")]
+        cells: list[Cell] = [name_cell(r["label"], names.get(r["method"]))]
+        cells += [r.get("act", ""), r["size"], _stat(r, "vcr")]
         cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
         steps = r.get("steps_mean", math.nan)
         ref = planner.get(r["size"])
@@ -209,9 +222,12 @@ _ADVICE_HEAD = (
 )  # fmt: skip
 
 
-def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
+def advice_table(
+    advisor_stats: dict[str, Any] | None, short_of_label: Mapping[str, str] | None = None
+) -> Table | None:
     """How much of each PIRL run the advice really shaped (from its ``advisor_stats.json``),
     and a line per run whose stats are damaged; None when there is neither.
+    ``short_of_label``: a full label's short name on the page.
 
     A PIRL row in the tables above is PPO-EWRI wherever its steps were unshaped (the student
     below its gate, failed answers, a spent budget): this table says how often.
@@ -241,7 +257,8 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
         )
         spent = s.get("budget_exhausted_at_step", -1)
         body.append([
-            name, label, f"{run.share(run.student):.0%}", f"{run.share(run.teacher):.0%}",
+            name, name_cell(label, (short_of_label or {}).get(label)),
+            f"{run.share(run.student):.0%}", f"{run.share(run.teacher):.0%}",
             f"{run.share(run.unshaped):.0%}", f"{s.get('mean_staleness', 0.0):.1f}",
             f"{s.get('teacher_calls_per_step', 0.0):.4f}", agreement,
             str(spent) if spent >= 0 else "not spent",
@@ -252,8 +269,9 @@ def advice_table(advisor_stats: dict[str, Any] | None) -> Table | None:
 def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]]:
     """P(each PIRL variant improves on each other method) in VCR, runs (seeds) as the unit,
     per sim and size, with its stratified bootstrap 95% interval (rliable): one dict per
-    comparison (``pirl``, ``other`` labels, ``sim``, ``size``, ``p``, ``lo``, ``hi``, the runs
-    on each side ``n_pirl``, ``n_other``, and ``fixed`` for a method without training runs)."""
+    comparison (``pirl``, ``other`` labels and their keys ``pirl_key``, ``other_key``, ``sim``,
+    ``size``, ``p``, ``lo``, ``hi``, the runs on each side ``n_pirl``, ``n_other``, and
+    ``fixed`` for a method without training runs)."""
     from pirl.evaluate.summary import probability_of_improvement, seed_scores
 
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
@@ -282,21 +300,28 @@ def improvements(records: list[dict[str, Any]], act: str) -> list[dict[str, Any]
                 y = seed_scores(groups[(other, sim, size)], "vcr")
                 p, lo, hi = probability_of_improvement(x, y)
                 fixed = all(r.get("act") == "fixed" for r in groups[(other, sim, size)])
-                out.append({"pirl": labels[pirl], "other": labels[other], "sim": sim,
-                            "size": size, "p": p, "lo": lo, "hi": hi, "n_pirl": x.shape[0],
-                            "n_other": y.shape[0], "fixed": fixed})  # fmt: skip
+                out.append({"pirl": labels[pirl], "other": labels[other], "pirl_key": pirl,
+                            "other_key": other, "sim": sim, "size": size, "p": p, "lo": lo,
+                            "hi": hi, "n_pirl": x.shape[0], "n_other": y.shape[0],
+                            "fixed": fixed})  # fmt: skip
     return out
 
 
 def improvement_table(
-    records: list[dict[str, Any]], act: str, found: list[dict[str, Any]] | None = None
+    records: list[dict[str, Any]],
+    act: str,
+    found: list[dict[str, Any]] | None = None,
+    names: Mapping[str, str] | None = None,
 ) -> Table | None:
     """P(PIRL improves on each baseline) in VCR, runs (seeds) as the unit, per sim and size,
     with the stratified bootstrap 95% interval (rliable); None without a comparison.
-    ``found``: :func:`improvements`, when already computed."""
+    ``found``: :func:`improvements`, when already computed; ``names``: the page's short
+    names (of ``records`` when None)."""
     found = improvements(records, act) if found is None else found
     if not found:
         return None
+    names = display_names(records) if names is None else names
+    short = {f[side]: names.get(f[f"{side}_key"]) for f in found for side in ("pirl", "other")}
     others = list(dict.fromkeys(f["other"] for f in found))
     cells: dict[tuple[str, str, str], dict[str, str]] = {}
     for f in found:
@@ -304,199 +329,16 @@ def improvement_table(
         cell[f["other"]] = f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]"
     return Table(
         f"Probability of improvement in VCR (act {act}; runs = training seeds)",
-        ["PIRL", "sim", "size", *others],
-        [[*key, *(row.get(o, "—") for o in others)] for key, row in cells.items()],
+        ["PIRL", "sim", "size", *(name_cell(o, short[o]) for o in others)],
+        [
+            [name_cell(pirl, short[pirl]), sim, size, *(row.get(o, "—") for o in others)]
+            for (pirl, sim, size), row in cells.items()
+        ],
         intro=[
             "P(a run of the row's PIRL scores a higher mean VCR than a run of the column's "
             "method) [stratified bootstrap 95% interval]; 0.5 = no difference."
         ],
     )
-
-
-def summary_lines(
-    rows: list[dict[str, Any]],
-    found: list[dict[str, Any]],
-    advisor_stats: dict[str, Any] | None,
-    act: str,
-) -> list[str]:
-    """A few sentences generated from the numbers, for the top of the report: which PIRL
-    variants beat (or lose to) which methods with a P(improvement) interval that excludes
-    0.5, how far the best learned method is from the planner in VCR and steps, and how much
-    of each PIRL run advice shaped."""
-    lines = []
-    # pirl -> "beats"/"loses to" -> other -> [("30x30x3", "0.90 [0.75, 1.00]"), ...]
-    verdicts: dict[str, dict[str, dict[str, list[tuple[str, str]]]]] = {}
-    judged = False
-    for f in found:
-        # One training run against one gives P of 0 or 1 with a point "interval": no claim.
-        if f["sim"] != "grid" or f["n_pirl"] < 2 or (f["n_other"] < 2 and not f["fixed"]):
-            continue
-        judged = True
-        verdict = "beats" if f["lo"] > 0.5 else "loses to" if f["hi"] < 0.5 else None
-        if verdict is not None:
-            where = (f["size"], f"{f['p']:.2f} [{f['lo']:.2f}, {f['hi']:.2f}]")
-            per = verdicts.setdefault(f["pirl"], {}).setdefault(verdict, {})
-            per.setdefault(f["other"], []).append(where)
-
-    def sizes(where: list[tuple[str, str]]) -> str:
-        if len({p for _, p in where}) == 1:  # the same P everywhere: say it once
-            return f"{', '.join(z for z, _ in where)}: {where[0][1]}"
-        return ", ".join(f"{z} {p}" for z, p in where)
-
-    for pirl, per in verdicts.items():
-        parts = [
-            f"{verdict} " + "; ".join(f"{other} ({sizes(where)})" for other, where in o.items())
-            for verdict, o in per.items()
-        ]
-        lines.append(
-            f"{pirl} {' and '.join(parts)}: P(improvement) in VCR [95% interval] excludes 0.5."
-        )
-    if found and not verdicts:
-        seeds = sorted({int(r.get("seeds", 1)) for r in rows if is_advised_key(r["method"])})
-        why = "" if judged else " (one training run per row: no interval to judge)"
-        lines.append(
-            "No PIRL variant beats or loses to another method in VCR with a P(improvement) "
-            f"interval that excludes 0.5{why}; training seeds per PIRL row: "
-            f"{', '.join(map(str, seeds))}, more seeds narrow the intervals."
-        )
-    grid = [r for r in _act_rows(rows, act) if r["sim"] == "grid"]
-    sizes = sorted({r["size"] for r in grid}, key=size_key)
-    gaps = []
-    for size in sizes:
-        here = [r for r in grid if r["size"] == size]
-        planner = next((r for r in here if is_planner(r["method"])), None)
-        learned = [r for r in here if r.get("act") != "fixed"]
-        if planner is None or not learned:
-            continue
-        best = max(learned, key=lambda r: r.get("vcr_iqm", r["vcr_mean"]))
-        vcr = best.get("vcr_iqm", best["vcr_mean"])
-        gaps.append(
-            f"on {size} {best['label']} reaches VCR {vcr:.2f} (IQM over seeds) in "
-            f"{best.get('steps_mean', math.nan):.0f} steps, the planner "
-            f"{planner.get('vcr_iqm', planner['vcr_mean']):.2f} in "
-            f"{planner.get('steps_mean', math.nan):.0f}"
-        )
-    if gaps:
-        lines.append(
-            f"Best learned method against the boustrophedon planner (act {act}): "
-            + "; ".join(gaps) + "."
-        )  # fmt: skip
-    runs = {n: s for n, s in (advisor_stats or {}).items() if isinstance(s, dict) and "steps" in s}
-    if runs:
-        parts = []
-        for name, st in sorted(runs.items()):
-            parts.append(f"{name} {RunStats.of(st).shaped_share:.0%}")
-        lines.append(
-            "Share of training steps shaped by advice (student or teacher) per PIRL run: "
-            + ", ".join(parts) + "; an unshaped step trains as PPO-EWRI."
-        )  # fmt: skip
-    return lines
-
-
-def interval_figure(rows: list[dict[str, Any]], path: Path, act: str, sim: str = "grid") -> Path:
-    """Aggregate intervals: per size, each method's VCR IQM over seeds with its stratified
-    bootstrap 95% interval (the rliable style), for one act mode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
-    sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
-    methods = sorted({r["method"] for r in sim_rows}, key=report_order)
-    labels = {r["method"]: f"{r['label']} ({int(r.get('seeds', 1))} seeds)" for r in sim_rows}
-    by = {(r["method"], r["size"]): r for r in sim_rows}
-    fig, axes = plt.subplots(
-        1, max(1, len(sizes)), figsize=(4.2 * max(1, len(sizes)) + 3, 0.45 * len(methods) + 1.6),
-        sharey=True, squeeze=False,
-    )  # fmt: skip
-    for ax, size in zip(axes[0], sizes, strict=False):
-        for k, method in enumerate(methods):
-            row = by.get((method, size))
-            if row is None:
-                continue
-            iqm = row.get("vcr_iqm", row["vcr_mean"])
-            lo, hi = row.get("vcr_iqm_lo", iqm), row.get("vcr_iqm_hi", iqm)
-            ax.plot([lo, hi], [k, k], lw=6, alpha=0.5, color=f"C{k % 10}")
-            ax.plot([iqm], [k], "|", ms=14, mew=2, color="k")
-        ax.set_title(size)
-        ax.set_xlim(0, 1.02)
-        ax.set_xlabel("VCR (IQM over seeds)")
-        ax.grid(axis="x", alpha=0.3)
-    axes[0][0].set_yticks(range(len(methods)), [labels[m] for m in methods], fontsize=8)
-    fig.suptitle(f"{sim} simulator, act {act}: IQM with stratified bootstrap 95% intervals")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-_BAR_FIGURES = {"grid": "figure.png", "physics": "figure_physics.png"}
-
-
-def bar_figure(rows: list[dict[str, Any]], path: Path, sim: str, act: str) -> Path:
-    """Grouped bars of VCR, BE and RVC per method and size for one act mode, with per-episode
-    95% CI error bars."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    sim_rows = [r for r in _act_rows(rows, act) if r["sim"] == sim]
-    sizes = sorted({r["size"] for r in sim_rows}, key=size_key)
-    methods = sorted({r["method"] for r in sim_rows}, key=report_order)
-    labels = {r["method"]: r["label"] for r in sim_rows}
-    by = {(r["method"], r["size"]): r for r in sim_rows}
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    width = 0.8 / max(1, len(methods))
-    x = np.arange(len(sizes))
-    for ax, metric in zip(axes, METRICS, strict=True):
-        for k, method in enumerate(methods):
-            means = [by[(method, s)][f"{metric}_mean"] if (method, s) in by else 0 for s in sizes]
-            errs = [
-                np.nan_to_num(by[(method, s)][f"{metric}_ci95"]) if (method, s) in by else 0
-                for s in sizes
-            ]
-            ax.bar(x + k * width, means, width, yerr=errs, capsize=3, label=labels[method])
-        ax.set_xticks(x + width * (len(methods) - 1) / 2, sizes)
-        ax.set_title(metric.upper() + (" (lower is better)" if metric == "rvc" else ""))
-        ax.set_ylim(0, 1.05)
-    handles, names = axes[0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="lower center", ncol=min(4, len(names)), fontsize=8)
-    fig.suptitle(f"{sim} simulator, act {act}: mean over episodes ± 95% CI over episodes")
-    rows_of_legend = math.ceil(len(names) / 4)
-    fig.tight_layout(rect=(0, 0.06 * rows_of_legend, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def learning_curves(runs: Sequence[Path], path: Path) -> Path:
-    """VCR of training episodes against steps, one line per run (rolling mean of 20)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for run in runs:
-        data = [(row["timesteps"], row["vcr"]) for row in RunFolder(Path(run)).episodes()]
-        if not data:
-            continue
-        steps, vcr = np.array(data).T
-        window = min(20, len(vcr))
-        smooth = np.convolve(vcr, np.ones(window) / window, mode="valid")
-        ax.plot(steps[window - 1 :], smooth, label=Path(run).name)
-    ax.set_xlabel("training steps")
-    ax.set_ylabel("episode VCR (rolling mean of 20)")
-    ax.set_ylim(0, 1.02)
-    ax.grid(alpha=0.3)
-    if ax.lines:
-        ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def _data_uri(path: Path) -> str:
@@ -524,28 +366,32 @@ def result_tables(
     advisor_stats: dict[str, Any] | None = None,
     extras: Sequence[Table] = (),
     found: list[dict[str, Any]] | None = None,
+    names: Mapping[str, str] | None = None,
 ) -> list[Table]:
     """The report's results in reading order: for each act mode (``acts``, the headline
     first) the IQM tables over seeds; how much advice shaped each PIRL run; ``extras``; the
     probability of improvement of PIRL over each baseline (headline mode; ``found``:
     :func:`improvements`, when already computed), camera use, physics beside grid; then the
-    per-episode tables (the secondary spread)."""
+    per-episode tables (the secondary spread). Methods carry their full labels (table.md)
+    and their short names (``names``, of ``rows`` when None: the page)."""
+    names = display_names(rows) if names is None else names
+    short_of_label = {r["label"]: names[r["method"]] for r in rows if r["method"] in names}
     headline = (
         f"Headline act mode: {acts[0]} (the same for every trained method; see docs/results.md)."
     )
     optional = [
-        advice_table(advisor_stats),
+        advice_table(advisor_stats, short_of_label),
         *extras,
-        improvement_table(records, acts[0], found),
-        camera_table(rows),
+        improvement_table(records, acts[0], found, names),
+        camera_table(rows, names=names),
         physics_gap_table(records),
     ]
     return [
         Table(intro=[headline]),
-        *(table for act in acts for table in paper_tables(rows, act)),
+        *(table for act in acts for table in paper_tables(rows, act, names=names)),
         *(table for table in optional if table is not None),
         Table("Secondary: spread over episodes", level=2),
-        *(table for act in acts for table in paper_tables(rows, act, stat="episode")),
+        *(t for act in acts for t in paper_tables(rows, act, stat="episode", names=names)),
     ]
 
 
@@ -581,10 +427,12 @@ def write_report(
     advice-quality curve of ``pirl reproduce --profile study-advice``, the missions of
     ``reproduce.missions``); report.html shows their figures at the top.
 
-    table.md and report.html open with a summary generated from the numbers
-    (:func:`summary_lines`); report.html shows the interval figures next. Then both hold the
-    tables of :func:`result_tables`; report.html ends with the bar figures, learning curves,
-    animations, advisor statistics and each run's config.yaml as written.
+    table.md opens with a summary generated from the numbers (:func:`summary_lines`, full
+    labels); report.html with what its first screen at 1280 px holds: the headline table and
+    at most three one-line findings (:mod:`pirl.report.glance`), then the legend of the short
+    names it calls methods by (:mod:`pirl.report.names`) and the interval figures. Then both
+    hold the tables of :func:`result_tables`; report.html ends with the bar figures, learning
+    curves, animations, advisor statistics and each run's config.yaml as written.
     """
     folder.mkdir(parents=True, exist_ok=True)
     rows = read_summary(summary)
@@ -594,33 +442,42 @@ def write_report(
     found = improvements(records, acts[0]) if records else []
     said = summary_lines(rows, found, advisor_stats, acts[0])
     top = Table("Summary", bullets=said, level=2, anchor="summary")
-    results = result_tables(rows, records, acts, advisor_stats, [t for _, t, _ in extras], found)
+    names = display_names(rows)
+    results = result_tables(
+        rows, records, acts, advisor_stats, [t for _, t, _ in extras], found, names
+    )
     (folder / "table.md").write_text(render_markdown([top, *results]))
+    glance_tables = [
+        Table("Summary", level=2, anchor="summary"),
+        headline_table(rows, records, acts[0], names),
+        Table(bullets=findings(rows, found, advisor_stats, acts[0], names), anchor="findings"),
+        legend_table(rows, names),
+    ]
 
     glance = [
         _image(f"Aggregate intervals over seeds (grid, act {act})", f"intervals {act}",
-               interval_figure(rows, folder / f"intervals_{act}.png", act))
+               interval_figure(rows, folder / f"intervals_{act}.png", act, names=names))
         for act in acts
         if any(r["sim"] == "grid" for r in rows)
     ]  # fmt: skip
     glance += [_image(title, title, figure) for title, _, figure in extras]
     sims = ["grid"] + (["physics"] if any(r["sim"] == "physics" for r in rows) else [])
-    figures = [
+    bars = [
         _image(f"Figure ({sim}, act {acts[0]}; per-episode spread)", f"{sim} bars",
-               bar_figure(rows, folder / _BAR_FIGURES[sim], sim, acts[0]))
+               bar_figure(rows, folder / BAR_FIGURES[sim], sim, acts[0], names))
         for sim in sims
     ]  # fmt: skip
-    figures.append(
+    bars.append(
         _image("Learning curves", "curves", learning_curves(runs, folder / "learning_curves.png"))
     )
     configs = [(Path(r).name, RunFolder(Path(r)).config_file) for r in runs]
     page = _page_template().render(
-        summary=top,
+        glance_tables=[t for t in glance_tables if t is not None],
         glance=glance,
         code_version=code_version,
         notes=notes,
         results=results,
-        figures=figures,
+        figures=bars,
         gifs=[_image(label, label, gif) for label, gif in (gifs or {}).items()],
         advisor_stats=json.dumps(advisor_stats, indent=2, sort_keys=True) if advisor_stats else "",
         configs=[(name, path.read_text()) for name, path in configs if path.is_file()],

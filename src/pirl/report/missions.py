@@ -171,16 +171,32 @@ def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from pirl.report.figures import style, width
+
+    n = sum(len(e) for _, _, e in rows)
+    with style():
+        fig, axes = plt.subplots(1, n, figsize=(width(n, 4.2), 4.4), squeeze=False)
+        _panels(axes[0], rows)
+        fig.suptitle(
+            "Missions flown from their files (green: ground seen in flight; red: waypoints)"
+        )
+        fig.tight_layout()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path)
+        plt.close(fig)
+    return path
+
+
+def _panels(axes: Any, rows: list[tuple[str, str, list[dict[str, Any]]]]) -> None:
+    """One panel per site and mission: map, ground seen in flight, waypoints."""
     from pirl.missions.fly import read_flight
     from pirl.world.site import load_site
 
-    n = sum(len(e) for _, _, e in rows)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False)
     k = 0
     for name, site_path, entries in rows:
         site = load_site(site_path)
         for e in entries:
-            ax = axes[0, k]
+            ax = axes[k]
             k += 1
             ax.imshow(site.heights.T, origin="lower", cmap="Greys", interpolation="nearest")
             seen = np.ma.masked_where(~e["flown"]["covered"].T, e["flown"]["covered"].T)
@@ -193,16 +209,9 @@ def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Pat
             ax.set_title(
                 f"{name}: {method[:38]}\nflown VCR {e['flown']['vcr']:.3f} "
                 f"(grid {e['summary']['vcr']:.3f})",
-                fontsize=8,
             )
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.suptitle("Missions flown from their files (green: ground seen in flight; red: waypoints)")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
 
 
 __all__ = ["best_run", "figure", "reproduction_missions", "section"]

@@ -16,23 +16,40 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Span:
     """A piece of a cell: plain, bold or italic text, or a link to ``href`` (a path relative
-    to the report folder, or ``#anchor``)."""
+    to the report folder, or ``#anchor``). ``short``: what the HTML page shows instead of
+    ``text`` (a method's display name; the full ``text`` is its hover title and the legend's),
+    while Markdown keeps ``text``."""
 
     text: str
     bold: bool = False
     italic: bool = False
     href: str | None = None
+    short: str | None = None
+
+
+class Named(str):
+    """A method's full label that the HTML page shows by its short name (``short``; the full
+    label is the hover title and the legend's). Everything else reads the label: it is the
+    ``str`` (table.md, a test comparing a cell with a label)."""
+
+    short: str
+
+    def __new__(cls, label: str, short: str) -> Named:
+        named = super().__new__(cls, label)
+        named.short = short
+        return named
 
 
 Cell = str | Span | tuple[Span, ...]
-"""A table cell: plain text, one span, or spans side by side."""
+"""A table cell: plain text (or :class:`Named`), one span, or spans side by side."""
 
 
 @dataclass(frozen=True)
 class Table:
     """One titled block of the report: paragraphs (``intro``), a table of ``rows`` under
     ``header`` (no table without a header), paragraphs after it (``notes``) and a bullet list.
-    ``level``: the heading's level; ``anchor``: the heading's id in the HTML page."""
+    ``level``: the heading's level; ``anchor``: the heading's id in the HTML page (and, for
+    a titled table, ``<anchor>-table`` the table's, ``<anchor>-list`` the list's)."""
 
     title: str = ""
     header: Sequence[str] = ()
@@ -47,9 +64,15 @@ class Table:
         """The rows with every cell as its spans (what a renderer walks)."""
         return [[spans(cell) for cell in row] for row in self.rows]
 
+    def span_header(self) -> list[tuple[Span, ...]]:
+        """The header with every name as its spans (a method names a column: :class:`Named`)."""
+        return [spans(cell) for cell in self.header]
+
 
 def spans(cell: Cell) -> tuple[Span, ...]:
     """A cell as its spans."""
+    if isinstance(cell, Named):
+        return (Span(str(cell), short=cell.short),)
     if isinstance(cell, str):
         return (Span(cell),)
     return (cell,) if isinstance(cell, Span) else cell
@@ -64,7 +87,9 @@ def render_markdown(tables: Iterable[Table]) -> str:
         for text in table.intro:
             lines += [text, ""]
         if table.header:
-            lines.append(_markdown_row(table.header))
+            lines.append(
+                _markdown_row("".join(map(_markdown_span, c)) for c in table.span_header())
+            )
             lines.append("|" + "---|" * len(table.header))
             for row in table.span_rows():
                 lines.append(_markdown_row("".join(map(_markdown_span, c)) for c in row))
@@ -95,4 +120,4 @@ def _markdown_span(span: Span) -> str:
     return f"[{text}]({href})"
 
 
-__all__ = ["Cell", "Span", "Table", "render_markdown", "spans"]
+__all__ = ["Cell", "Named", "Span", "Table", "render_markdown", "spans"]
