@@ -95,7 +95,7 @@ def test_a_file_too_large_or_nested_too_deep_is_one_line(tmp_path: Path) -> None
 
 
 def test_stale_staging_folders_go_and_a_running_writers_stay(tmp_path: Path) -> None:
-    from pirl.missions.write import _host
+    from pirl.missions.staging import host_name as _host
 
     done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True, check=True)  # fmt: skip

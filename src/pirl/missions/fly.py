@@ -41,12 +41,12 @@ from pirl.missions.read import (
     read_waypoints,
     role,
 )
+from pirl.missions.staging import pid_alive
 from pirl.missions.write import (
     Geo,
     file_digest,
     geo_for,
     pan_from_yaw,
-    pid_alive,
     tilt_from_pitch,
     zoom10_from_percent,
 )

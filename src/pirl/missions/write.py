@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.grid import ZOOM_MAX10, ZOOM_MIN10
 from pirl.config.mission import DEFAULT_ORIGIN, MissionSettings
 from pirl.config.world import VCPPConfig
+from pirl.missions.staging import host_name, remove_stale_staging
 
 NAN = float("nan")
 
@@ -481,49 +481,6 @@ def kml(features: dict, name: str, description: str) -> str:
     return env.from_string(KML).render(name=name, description=description, features=polys)
 
 
-# -- writing a folder whole ------------------------------------------------------------------
-def pid_alive(pid: int) -> bool:
-    """Whether a process of this id runs on this machine (one of another user's counts)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OverflowError):
-        return True
-    return True
-
-
-def _host() -> str:
-    """This machine's name as a staging folder carries it (letters and digits only)."""
-    import socket
-
-    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:32] or "host"
-
-
-STAGING = re.compile(r"^\..+\.staging-(?P<host>[A-Za-z0-9]*)-(?P<pid>[0-9]+)-[A-Za-z0-9_]+$")
-"""A folder ``pirl plan`` writes into before renaming it to ``--out``: ``.NAME.staging-HOST-
-PID-RANDOM``, beside ``--out`` (a rename within one file system is atomic)."""
-
-
-def remove_stale_staging(parent: Path) -> list[Path]:
-    """Remove the staging folders in ``parent`` whose writer, on this machine, is gone (a
-    ``pirl plan`` killed mid-write); a running writer's, or another machine's, stay."""
-    removed: list[Path] = []
-    host = _host()
-    try:
-        entries = list(parent.iterdir())
-    except OSError:
-        return removed
-    for entry in entries:
-        found = STAGING.match(entry.name)
-        if not found or found["host"] != host or pid_alive(int(found["pid"])):
-            continue
-        if entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry, ignore_errors=True)
-            removed.append(entry)
-    return removed
-
-
 # -- the command ------------------------------------------------------------------------------
 def mission_source(
     env: VCPPConfig,
@@ -609,7 +566,7 @@ def write_mission(
     # A run killed mid-write leaves its staging folder: the next run into this parent clears it.
     remove_stale_staging(out.parent)
     tmp = Path(
-        tempfile.mkdtemp(prefix=f".{out.name}.staging-{_host()}-{os.getpid()}-", dir=out.parent)
+        tempfile.mkdtemp(prefix=f".{out.name}.staging-{host_name()}-{os.getpid()}-", dir=out.parent)
     )
     umask = os.umask(0)
     os.umask(umask)
