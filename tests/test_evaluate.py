@@ -317,3 +317,32 @@ def test_pairwise_improvement_is_rliables_probability_of_improvement():
     np.random.seed(123)
     assert probability_of_improvement(x, y, reps=200) == ours
     assert interval_estimates(x) == interval_estimates(x)
+
+
+def test_steps_to_near_complete_coverage_against_the_planner():
+    from pirl.agents.loading import load_policy
+    from pirl.config.world import VCPPConfig
+    from pirl.env.vcpp_env import VCPPEnv
+    from pirl.evaluate.rollout import run_episode
+    from pirl.report.document import camera_table
+
+    env = VCPPEnv(VCPPConfig(size=(12, 12, 3)))
+    m = run_episode(env, load_policy("boustrophedon"), 3).metrics
+    # The planner covers the world: it passes 0.99 of the coverable cells at or before its end.
+    assert m["vcr"] >= 0.99 and 0 < m["steps_to_99"] <= m["steps"]
+    stuck = run_episode(env, load_policy("random", seed=0), 3).metrics
+    assert stuck["vcr"] < 0.99 and stuck["steps_to_99"] is None
+    rows = summarize(
+        [{"method": "boustrophedon", "sim": "grid", "size": "12x12x3", "act": "fixed",
+          "vcr": 1.0, "be": 0.5, "rvc": 0.0, "run": "planner", "steps_to_99": 100},
+         {"method": "ppo-ewri", "sim": "grid", "size": "12x12x3", "act": "fixed",
+          "vcr": 0.99, "be": 0.5, "rvc": 0.0, "run": "a", "steps_to_99": 150, "label": "PPO-EWRI"},
+         {"method": "ppo-ewri", "sim": "grid", "size": "12x12x3", "act": "fixed",
+          "vcr": 0.5, "be": 0.5, "rvc": 0.0, "run": "a", "steps_to_99": None, "label": "PPO-EWRI"}]
+    )  # fmt: skip
+    ewri = next(r for r in rows if r["method"] == "ppo-ewri")
+    assert ewri["steps_to_99_mean"] == 150 and ewri["reached_99"] == 1
+    table = camera_table(rows)
+    col = table.header.index("steps to 0.99 / planner's")
+    cells = {row[0]: row[col] for row in table.rows}
+    assert cells["PPO-EWRI"] == "1.50 (1 of 2 got there)"

@@ -15,7 +15,7 @@ from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.vcpp_env import VCPPEnv
-from pirl.world.metrics import PathTail, episode_metrics
+from pirl.world.metrics import Milestone, PathTail, episode_metrics
 
 
 @dataclass
@@ -34,17 +34,23 @@ def run_episode(
     obs, info = env.reset(seed=seed)
     policy.reset(env.world, 0, seed=seed)
     frames = [env.render()] if record else []
-    tail = PathTail(1)
+    tail, near = PathTail(1), Milestone(1)
     done = False
     step = 0
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         tail.record(env.world)
+        near.record(env.world)
         done = terminated or truncated
         step += 1
         if record and (done or step % frame_every == 0):
             frames.append(env.render())
-    return EpisodeResult(seed, {**info["episode_metrics"], "tail_cells": tail.distinct(0)}, frames)
+    metrics = {
+        **info["episode_metrics"],
+        "tail_cells": tail.distinct(0),
+        "steps_to_99": near.steps(0),
+    }
+    return EpisodeResult(seed, metrics, frames)
 
 
 def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[dict[str, float]]:
@@ -67,17 +73,22 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
     metrics: list[dict[str, float] | None] = [None] * n
     active = np.ones(n, dtype=bool)
     actions = np.zeros(n, dtype=np.int64)
-    tail = PathTail(n)
+    tail, near = PathTail(n), Milestone(n)
     while active.any():
         live = np.flatnonzero(active)
         actions[live] = policy.act_batch(core.obs[live], [rngs[e] for e in live], core.masks[live])
         ended_any = core.step(actions)
         tail.record(core.world, live)
+        near.record(core.world, live)
         if ended_any:
             flags = core.world.flags
             ended = live[(flags["terminated"][live] | flags["truncated"][live]) != 0]
             for e in ended:
-                metrics[e] = {**episode_metrics(core.world, int(e)), "tail_cells": tail.distinct(e)}
+                metrics[e] = {
+                    **episode_metrics(core.world, int(e)),
+                    "tail_cells": tail.distinct(e),
+                    "steps_to_99": near.steps(int(e)),
+                }
             active[ended] = False
     return [m for m in metrics if m is not None]
 

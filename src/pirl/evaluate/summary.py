@@ -42,7 +42,7 @@ COLUMNS = (
     + ["act", "seeds"]
     + [f"{m}_{s}" for m in HEADLINE for s in ("iqm", "iqm_lo", "iqm_hi", "mean_lo", "mean_hi")]
     + [f"{m}_mean" for m in OTHER]
-    + ["loop_episodes", "label"]
+    + ["steps_to_99_mean", "reached_99", "loop_episodes", "label"]
 )
 SITE_PREFIX = "site:"
 """The ``size`` of a site's episode rows: ``site:<name>`` (its grid size is ``grid``)."""
@@ -162,6 +162,11 @@ def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row[f"{metric}_{key}"] = est[key]
         for metric in OTHER:
             row[f"{metric}_mean"] = float(np.mean([g.get(metric, 0.0) for g in group]))
+        # Steps to 0.99 of coverable cells, over the episodes that got there (how many did:
+        # reached_99; rows written before it was measured have none).
+        near = [g["steps_to_99"] for g in group if g.get("steps_to_99") is not None]
+        row["steps_to_99_mean"] = float(np.mean(near)) if near else math.nan
+        row["reached_99"] = len(near)
         row["loop_episodes"] = loop_episodes(group)
         row["label"] = honest_label(group[0].get("label", method), _sources(group))
         rows.append(row)

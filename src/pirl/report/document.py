@@ -187,8 +187,14 @@ def camera_table(
     planner = {
         r["size"]: r.get("steps_mean") for r in sim_rows if r["method"] == BoustrophedonPolicy.name
     }
+    near_ref = {
+        r["size"]: r.get("steps_to_99_mean")
+        for r in sim_rows
+        if r["method"] == BoustrophedonPolicy.name
+    }
     head = ["method", "act", "size", "VCR (IQM)"] + [name for _, name in CAMERA]
-    head += ["steps / planner's", "VCR per 100 steps", "episodes ending in a loop"]
+    head += ["steps to 0.99 / planner's", "steps / planner's", "VCR per 100 steps"]
+    head += ["episodes ending in a loop"]
     guard = any(r.get("guarded_share_mean", 0.0) > 0 for r in sim_rows)
     if guard:  # the env's stall guard chose some actions: say how many, per row
         head.append("steps chosen by the stall guard")
@@ -205,6 +211,7 @@ def camera_table(
         cells += [f"{r.get(f'{k}_mean', math.nan):.2f}" for k, _ in CAMERA]
         steps = r.get("steps_mean", math.nan)
         ref = planner.get(r["size"])
+        cells.append(_near_complete(r, near_ref.get(r["size"])))
         cells.append(f"{steps / ref:.2f}" if ref and steps and steps > 0 else "—")
         cells.append(f"{100 * r['vcr_mean'] / steps:.2f}" if steps and steps > 0 else "—")
         loops = r.get("loop_episodes")  # absent from a summary written before it was counted
@@ -213,6 +220,16 @@ def camera_table(
             cells.append(f"{r.get('guarded_share_mean', 0.0):.1%}")
         body.append(cells)
     return Table(f"Camera use ({sim} simulator; means over episodes)", head, body)
+
+
+def _near_complete(row: dict[str, Any], ref: float | None) -> str:
+    """Steps to 0.99 of coverable cells over the planner's on the same scenarios (means over
+    the episodes that got there), and how many did when not all."""
+    steps, n = row.get("steps_to_99_mean", math.nan), int(row.get("reached_99", 0) or 0)
+    if not n or not ref or math.isnan(ref) or math.isnan(steps):
+        return "never" if "reached_99" in row and row.get("n") else "—"
+    text = f"{steps / ref:.2f}"
+    return text if n >= int(row["n"]) else f"{text} ({n} of {int(row['n'])} got there)"
 
 
 _ADVICE_HEAD = (

@@ -47,6 +47,33 @@ class PathTail:
         return int(np.unique(row[row >= 0]).size)
 
 
+NEAR_COMPLETE = 0.99
+"""The share of coverable cells at which an episode counts as nearly complete: its step there
+(``steps_to_99``) compares a method's pace with the planner's whatever their endings."""
+
+
+class Milestone:
+    """The step at which each world of a batch first covered :data:`NEAR_COMPLETE` of its
+    coverable cells (-1 while it has not)."""
+
+    def __init__(self, n: int, share: float = NEAR_COMPLETE) -> None:
+        self.share = share
+        self.first = np.full(n, -1, dtype=np.int64)
+
+    def record(self, world: WorldBatch, live: np.ndarray | None = None) -> None:
+        """After a step of the worlds of ``live`` (default: every world)."""
+        if live is None:
+            live = np.arange(len(self.first))
+        st = world.status[live]
+        reached = st["covered"] >= self.share * np.maximum(st["coverable"], 1)
+        new = reached & (self.first[live] < 0)
+        self.first[live[new]] = st["steps"][new]
+
+    def steps(self, e: int) -> int | None:
+        """World ``e``'s step at the milestone, or None when it never got there."""
+        return int(self.first[e]) if self.first[e] >= 0 else None
+
+
 def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
     """Metrics of world ``e``'s episode so far (docs/design.md: metrics)."""
     r = dict(zip(batch.status.dtype.names, batch.status[e].tolist(), strict=True))
