@@ -23,6 +23,7 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select
 
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.agents.run_folder import RunFolder
+from pirl.config.choices import PareMode, Sim
 from pirl.evaluate.summary import honest_label, read_summary, size_key
 from pirl.pare.stats import RunStats
 from pirl.report.figures import BAR_FIGURES, bar_figure, interval_figure, learning_curves
@@ -62,7 +63,7 @@ def _parse_paper(text: str) -> dict[str, dict[str, dict[str, tuple[float, float,
 PAPER = _parse_paper(_PAPER_TEXT)
 METRICS = ("vcr", "be", "rvc")
 HIGHER_IS_BETTER = {"vcr": True, "be": True, "rvc": False}
-SIM_TITLES = {"grid": "Table 1: grid simulator", "physics": "Table 2: physics simulator"}
+SIM_TITLES = {Sim.GRID: "Table 1: grid simulator", Sim.PHYSICS: "Table 2: physics simulator"}
 
 
 ACT_NOTE = {
@@ -114,7 +115,7 @@ def paper_tables(
     )
     key = "iqm" if stat == "iqm" else "mean"
     tables = []
-    for sim in ("grid", "physics"):
+    for sim in Sim:
         sim_rows = [r for r in rows if r["sim"] == sim]
         if not sim_rows:
             continue
@@ -269,7 +270,7 @@ def advice_table(
             label = honest_label(label, [s["source"]])
         agreement = (
             f"{s['student_agreement']:.2f} ({s['student_majority']:.2f})"
-            if s.get("mode") == "student"
+            if s.get("mode") == PareMode.STUDENT
             else "-"
         )
         spent = s.get("budget_exhausted_at_step", -1)
@@ -478,7 +479,7 @@ def write_report(
         if any(r["sim"] == "grid" for r in rows)
     ]  # fmt: skip
     glance += [_image(title, title, figure) for title, _, figure in extras]
-    sims = ["grid"] + (["physics"] if any(r["sim"] == "physics" for r in rows) else [])
+    sims = [Sim.GRID] + ([Sim.PHYSICS] if any(r["sim"] == Sim.PHYSICS for r in rows) else [])
     bars = [
         _image(f"Figure ({sim}, act {acts[0]}; per-episode spread)", f"{sim} bars",
                bar_figure(rows, folder / BAR_FIGURES[sim], sim, acts[0], names))

@@ -18,6 +18,7 @@ import numpy as np
 
 from pirl.agents.methods import report_order
 from pirl.agents.run_folder import RunFolder
+from pirl.config.choices import Sim
 from pirl.evaluate.summary import HEADLINE, size_key
 from pirl.report.glance import act_rows
 from pirl.report.names import display_names
@@ -102,7 +103,7 @@ def interval_figure(
     return path
 
 
-BAR_FIGURES = {"grid": "figure.png", "physics": "figure_physics.png"}
+BAR_FIGURES = {Sim.GRID: "figure.png", Sim.PHYSICS: "figure_physics.png"}
 
 
 def bar_figure(

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.config.choices import Sim
 from pirl.physics.flight import ENERGY_CAUSES
 from pirl.report.tables import Table
 
@@ -47,7 +48,7 @@ def physics_gap_table(records: list[dict[str, Any]]) -> Table | None:
     physics: dict[tuple, list[dict[str, Any]]] = defaultdict(list)
     grid: dict[tuple, dict[int, dict[str, Any]]] = defaultdict(dict)
     for r in records:
-        if r.get("sim") == "physics":
+        if r.get("sim") == Sim.PHYSICS:
             physics[_key(r)].append(r)
         elif r.get("sim") == "grid":
             grid[_key(r)][int(r["seed"])] = r
