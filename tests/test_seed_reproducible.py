@@ -37,7 +37,7 @@ def _config(tmp: Path, advisor: str) -> Path:
     # oracle after about three rollouts of its own answers.
     data["pare"].update(
         advisor=advisor, mode="student", prompt_variant=quick.pare.prompt_variant,
-        teacher_rate=0.05, oracle_teacher_rate=0.25, student_gate_on="agreement",
+        teacher_rate=0.02, oracle_teacher_rate=0.25, student_gate_on="agreement",
         student_gate=0.0, student_closed_rate=1.0, student_fit_steps=20,
         student_dataset=str(tmp / "student.sqlite"), cache_path=str(tmp / "advice.sqlite"),
     )  # fmt: skip
