@@ -12,7 +12,6 @@ atomically afterwards, so an interrupted write never damages the last good check
 from __future__ import annotations
 
 import copy
-import os
 import random
 import shutil
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pirl._atomic import write_atomic
 from pirl.config import safe_state
 from pirl.config.errors import ConfigError
 
@@ -119,7 +119,7 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
     safe_state.save(state, tmp / STATE_FILE)
     shutil.rmtree(final, ignore_errors=True)
     tmp.rename(final)
-    _atomic_text(folder / "LATEST", name)
+    write_atomic(folder / "LATEST", name)
     for old in sorted(folder.glob("step_*"), key=lambda p: int(p.name.split("_")[1]))[:-keep]:
         if old.name != name:
             shutil.rmtree(old, ignore_errors=True)
@@ -183,12 +183,6 @@ def _step_of(path: Path) -> int:
         return int(path.name.split("_")[1])
     except (IndexError, ValueError):
         return -1
-
-
-def _atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _torch():

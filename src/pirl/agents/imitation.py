@@ -10,7 +10,6 @@ accuracy is written to ``il_stats.json``.
 from __future__ import annotations
 
 import contextlib
-import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -19,13 +18,13 @@ import numpy as np
 import torch
 from sb3_contrib import MaskablePPO
 
+from pirl._atomic import replacing, write_json
 from pirl.agents.methods import IL, PPO_METHODS, method
 from pirl.agents.run_folder import (
     RunFolder,
     git_commit,
     prepare_run_folder,
     train_seed_base,
-    write_json,
 )
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
@@ -122,10 +121,10 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
             drop_last=False,
         )
         accuracy = float((clf.predict(x_valid) == y_valid).mean()) if len(y_valid) else 0.0
-        tmp = out / "tabnet.tmp"
-        saved = Path(clf.save_model(str(tmp)))
-    os.replace(saved, out / TABNET_FILE)
-    shutil.rmtree(tmp, ignore_errors=True)
+        # TabNet zips a folder it names after the path given, adding ".zip" to it.
+        with replacing(out / TABNET_FILE, out / "tabnet.tmp.zip") as tmp:
+            clf.save_model(str(tmp.with_suffix("")))
+        shutil.rmtree(out / "tabnet.tmp", ignore_errors=True)
     stats = {
         "valid_accuracy": accuracy,
         "train_rows": len(x_fit),

@@ -22,6 +22,7 @@ from typing import Any
 import yaml
 from filelock import FileLock, Timeout
 
+from pirl._atomic import write_json
 from pirl.agents import checkpoint
 from pirl.agents.methods import METHODS
 from pirl.agents.methods import method as method_entry
@@ -196,13 +197,6 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return (sha + ("-dirty" if dirty else "")) if sha else "unknown"
-
-
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (temporary file, then rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
-    os.replace(tmp, path)
 
 
 _RESUME_STOP = "; resume takes the run's own settings (leave the option out) or choose a new --out"
@@ -449,7 +443,7 @@ class RunFolder:
         self.config_file.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
 
     def write_meta(self, meta: dict[str, Any]) -> None:
-        write_json(self.meta_file, meta)
+        write_json(self.meta_file, meta, sort_keys=True, default=str)
 
     def write_advisor_stats(self, stats: dict[str, Any]) -> None:
-        write_json(self.advisor_stats_file, stats)
+        write_json(self.advisor_stats_file, stats, sort_keys=True, default=str)

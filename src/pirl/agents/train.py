@@ -21,7 +21,6 @@
 from __future__ import annotations
 
 import csv
-import os
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -33,6 +32,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
+from pirl._atomic import replacing
 from pirl.agents import checkpoint
 from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, Method
 from pirl.agents.run_folder import (
@@ -458,9 +458,8 @@ def _finish(
     """Write the final model (atomically), the advisor's statistics, and mark the run
     complete; a mostly unshaped PIRL run is PPO-EWRI under PIRL's name, so it says so."""
     final = run.path / "model.zip"
-    tmp = run.path / "model.tmp.zip"
-    checkpoint.save_model(model, tmp)
-    os.replace(tmp, final)
+    with replacing(final, run.path / "model.tmp.zip") as tmp:  # SB3 adds ".zip" to other names
+        checkpoint.save_model(model, tmp)
     if stack.pare is not None:
         from pirl.agents.pirl_advice import unshaped_warning
 
