@@ -24,7 +24,7 @@ from filelock import FileLock, Timeout
 
 from pirl._atomic import write_json
 from pirl.agents import checkpoint
-from pirl.agents.methods import METHODS
+from pirl.agents.methods import IMITATION_ARTIFACT, METHODS, PPO_ARTIFACT
 from pirl.agents.methods import method as method_entry
 from pirl.config.errors import ConfigError, UserError
 from pirl.config.run import RunConfig
@@ -402,7 +402,7 @@ class RunFolder:
         """Path, mtime and size of the policy files: a model trained again into the same
         folder is a new policy, never a cached old one."""
         ident = []
-        for name in ("model.zip", "tabnet.zip", self.META):
+        for name in (PPO_ARTIFACT, IMITATION_ARTIFACT, self.META):
             path = self.path / name
             try:
                 st = path.stat()
