@@ -448,6 +448,13 @@ def test_webots_world_has_mavic_camera_zoom_floor_and_the_scenarios_spheres(tmp_
     assert "pirl.physics.webots.controller" in shim.read_text()
 
 
+def test_webots_world_strings_are_json_escaped_not_html_escaped() -> None:
+    odd = 'runs/<a & b>/it\'s "q", ü.yaml'
+    text = world_text(VCPPConfig(size=(12, 10, 3)), 5, config_path=odd)
+    assert f"    {json.dumps(odd)}\n  ]\n" in text  # the last controller argument
+    assert text.endswith("}\n") and "\n\n" not in text.split("WorldInfo", 1)[1]
+
+
 def test_webots_controller_rebuilds_the_worlds_mission(tmp_path) -> None:
     cfg = VCPPConfig(size=(12, 10, 3))
     write_world(tmp_path / "w.wbt", cfg, 5, controller=False)

@@ -273,10 +273,9 @@ def print_score(
     seed: int,
 ) -> None:
     """``pirl advise --score``: the advisor scored against the oracle, and the price of a run."""
-    import json
-
     from rich.progress import Progress
 
+    from pirl._atomic import write_json
     from pirl.advice.factory import make_advisor
     from pirl.evaluate.advice_score import price_run, score_advisor
 
@@ -320,9 +319,7 @@ def print_score(
         data = {**result.to_dict(), "price": price.to_dict(), "seed": seed,
                 "prompt_variant": cfg.pare.prompt_variant}  # fmt: skip
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(json.dumps(data, indent=2))
-        tmp.replace(out)
+        write_json(out, data)
         console.print(f"wrote {out}")
 
 

@@ -17,6 +17,8 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import urlparse
 
+import tenacity
+
 try:  # the HTTP library the openai SDK is built on: httpx2 in its newer releases
     import httpx2 as httpx
 except ImportError:  # pragma: no cover - older openai releases use httpx
@@ -167,10 +169,8 @@ class OpenAIAdvisor(Advisor):
         return messages
 
     def _ask(self, client: Any, prompt: str, deadline: float | None = None) -> Answer:
-        """One prompt, with retries, done by ``deadline`` (``time.monotonic``); every failure
-        becomes an error answer."""
-        import openai
-
+        """One prompt, with retries (:mod:`tenacity`), done by ``deadline``
+        (``time.monotonic``); every failure becomes an error answer."""
         started = time.perf_counter()
         request: dict[str, Any] = {
             "model": self.model,
@@ -180,43 +180,50 @@ class OpenAIAdvisor(Advisor):
         }
         if self.seed is not None:
             request["seed"] = self.seed
-        attempt = 0
         if deadline is None:
             deadline = time.monotonic() + self.deadline_s
-        while True:
+        attempts = 0  # requests sent
+
+        def send() -> Any:
+            nonlocal attempts
             left = deadline - time.monotonic()
             if left <= 0.05:
-                return error_answer(
-                    f"{NO_ANSWER} the {self.deadline_s:g} s deadline "
-                    f"(advisor.openai_deadline_s) after {attempt} attempt(s)",
-                    time.perf_counter() - started,
+                raise _DeadlinePassed
+            attempts += 1
+            # Each attempt gets what is left of the deadline at most.
+            return client.chat.completions.create(**request, timeout=min(self.timeout_s, left))
+
+        def wait(state: tenacity.RetryCallState) -> float:
+            exc = state.outcome.exception() if state.outcome else None
+            delay = self._delay(state.attempt_number - 1, exc or Exception())
+            return min(delay, max(0.0, deadline - time.monotonic()))  # the deadline check waits
+
+        retrying = tenacity.Retrying(
+            retry=tenacity.retry_if_exception(_retryable),
+            stop=tenacity.stop_after_attempt(self.max_retries + 1),
+            wait=wait,
+            before_sleep=_log_retry,
+            reraise=True,  # the last error itself, classified below, never raised
+        )
+        try:
+            response = retrying(send)
+        except _DeadlinePassed:
+            return error_answer(
+                f"{NO_ANSWER} the {self.deadline_s:g} s deadline "
+                f"(advisor.openai_deadline_s) after {attempts} attempt(s)",
+                time.perf_counter() - started,
+            )
+        except Exception as exc:  # noqa: BLE001 - every failure becomes an error answer
+            big = _too_large(exc)
+            if big is not None:  # counted as unparseable, never kept whole
+                return Answer(
+                    text=big.head,
+                    recommendation=None,
+                    latency_s=time.perf_counter() - started,
+                    reply_chars=big.size,
                 )
-            try:
-                # Each attempt gets what is left of the deadline at most.
-                response = client.chat.completions.create(
-                    **request, timeout=min(self.timeout_s, left)
-                )
-                break
-            except Exception as exc:  # noqa: BLE001 - classified below, never raised
-                big = _too_large(exc)
-                if big is not None:  # counted as unparseable, never kept whole
-                    return Answer(
-                        text=big.head,
-                        recommendation=None,
-                        latency_s=time.perf_counter() - started,
-                        reply_chars=big.size,
-                    )
-                retryable = isinstance(
-                    exc,
-                    openai.RateLimitError | openai.APIConnectionError | openai.InternalServerError,
-                ) or (isinstance(exc, openai.APIStatusError) and exc.status_code >= 500)
-                if not retryable or attempt >= self.max_retries:
-                    elapsed = time.perf_counter() - started
-                    return error_answer(_describe(exc, attempt + 1, client.api_key), elapsed)
-                delay = min(self._delay(attempt, exc), max(0.0, deadline - time.monotonic()))
-                log.debug("retrying after %s in %.2f s", type(exc).__name__, delay)
-                time.sleep(delay)
-                attempt += 1
+            elapsed = time.perf_counter() - started
+            return error_answer(_describe(exc, attempts, client.api_key), elapsed)
         elapsed = time.perf_counter() - started
         try:
             choice = response.choices[0]
@@ -261,6 +268,29 @@ class OpenAIAdvisor(Advisor):
 
     def __repr__(self) -> str:
         return f"OpenAIAdvisor(model={self.model!r}, base_url={self.base_url!r})"
+
+
+class _DeadlinePassed(Exception):
+    """Raised instead of a request when too little of the ``advise`` deadline is left."""
+
+
+def _log_retry(state: tenacity.RetryCallState) -> None:
+    # The error's type only: its text may echo the key (tenacity's before_sleep_log prints it).
+    exc = state.outcome.exception() if state.outcome else None
+    sleep = state.next_action.sleep if state.next_action else 0.0
+    log.debug("retrying after %s in %.2f s", type(exc).__name__, sleep)
+
+
+def _retryable(exc: BaseException) -> bool:
+    """Whether a failed request may succeed later: rate limits (429), timeouts, dropped
+    connections and server errors (5xx), but not a reply cut for its size."""
+    import openai
+
+    if _too_large(exc) is not None:
+        return False
+    return isinstance(
+        exc, openai.RateLimitError | openai.APIConnectionError | openai.InternalServerError
+    ) or (isinstance(exc, openai.APIStatusError) and exc.status_code >= 500)
 
 
 MAX_REPLY_BYTES = 256 * 1024

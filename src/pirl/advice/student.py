@@ -38,6 +38,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from pirl._atomic import replacing
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.teacher_dataset import TeacherDataset, default_dataset_path
@@ -444,9 +445,8 @@ class Student:
         """Write the student (weights, optimizer, score, row ids) atomically, as arrays and
         JSON (:mod:`pirl.config.safe_state`): a student from anyone loads without running code."""
         path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        safe_state.save(self.state_dict(), tmp)
-        os.replace(tmp, path)
+        with replacing(path) as tmp:
+            safe_state.save(self.state_dict(), tmp)
         return path
 
     @classmethod

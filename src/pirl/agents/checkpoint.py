@@ -12,7 +12,6 @@ atomically afterwards, so an interrupted write never damages the last good check
 from __future__ import annotations
 
 import copy
-import os
 import random
 import shutil
 from pathlib import Path
@@ -20,6 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pirl._atomic import write_atomic
+from pirl.agents.methods import PPO_ARTIFACT
 from pirl.config import safe_state
 from pirl.config.errors import ConfigError
 
@@ -111,7 +112,7 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
         model.policy.load_state_dict(state["policy"])
         model.policy.optimizer.load_state_dict(state["optimizer"])
         model.num_timesteps = state["num_timesteps"]
-        save_model(model, tmp / "model.zip")
+        save_model(model, tmp / PPO_ARTIFACT)
     finally:
         model.policy.load_state_dict(live)
         model.policy.optimizer.load_state_dict(live_opt)
@@ -119,7 +120,7 @@ def write(state: dict, model: PPO, folder: Path, keep: int = 3) -> Path:
     safe_state.save(state, tmp / STATE_FILE)
     shutil.rmtree(final, ignore_errors=True)
     tmp.rename(final)
-    _atomic_text(folder / "LATEST", name)
+    write_atomic(folder / "LATEST", name)
     for old in sorted(folder.glob("step_*"), key=lambda p: int(p.name.split("_")[1]))[:-keep]:
         if old.name != name:
             shutil.rmtree(old, ignore_errors=True)
@@ -138,7 +139,7 @@ def latest(folder: Path) -> Path | None:
     if not pointer.is_file():
         return None
     path = folder / pointer.read_text().strip()
-    return path if (path / STATE_FILE).is_file() and (path / "model.zip").is_file() else None
+    return path if (path / STATE_FILE).is_file() and (path / PPO_ARTIFACT).is_file() else None
 
 
 def load_state(path: Path) -> dict:
@@ -158,7 +159,7 @@ def load_latest(folder: Path, log: Any = None) -> tuple[Path, dict] | None:
     for path in candidates:
         if (path / OLD_STATE_FILE).is_file() and not (path / STATE_FILE).is_file():
             raise safe_state.refuse_pickle(path / OLD_STATE_FILE, "a checkpoint")
-        if not ((path / STATE_FILE).is_file() and (path / "model.zip").is_file()):
+        if not ((path / STATE_FILE).is_file() and (path / PPO_ARTIFACT).is_file()):
             continue
         try:
             state = load_state(path)
@@ -183,12 +184,6 @@ def _step_of(path: Path) -> int:
         return int(path.name.split("_")[1])
     except (IndexError, ValueError):
         return -1
-
-
-def _atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _torch():

@@ -10,7 +10,6 @@ accuracy is written to ``il_stats.json``.
 from __future__ import annotations
 
 import contextlib
-import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -19,19 +18,17 @@ import numpy as np
 import torch
 from sb3_contrib import MaskablePPO
 
-from pirl.agents.methods import IL, PPO_METHODS, method
+from pirl._atomic import replacing, write_json
+from pirl.agents.methods import IL, IMITATION_ARTIFACT, PPO_METHODS, method
 from pirl.agents.run_folder import (
     RunFolder,
     git_commit,
     prepare_run_folder,
     train_seed_base,
-    write_json,
 )
 from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.env.sb3_vec import make_vec_env
-
-TABNET_FILE = "tabnet.zip"
 
 
 def load_expert(expert_run: Path) -> Any:
@@ -88,8 +85,8 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
     run = RunFolder(out)
     if resume:
         run.check_resumes(IL.name, seed)
-    if resume and (out / TABNET_FILE).is_file():
-        return out / TABNET_FILE
+    if resume and (out / IMITATION_ARTIFACT).is_file():
+        return out / IMITATION_ARTIFACT
     expert_model = load_expert(expert)  # before the run folder exists
     if resume:
         out.mkdir(parents=True, exist_ok=True)
@@ -122,10 +119,10 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
             drop_last=False,
         )
         accuracy = float((clf.predict(x_valid) == y_valid).mean()) if len(y_valid) else 0.0
-        tmp = out / "tabnet.tmp"
-        saved = Path(clf.save_model(str(tmp)))
-    os.replace(saved, out / TABNET_FILE)
-    shutil.rmtree(tmp, ignore_errors=True)
+        # TabNet zips a folder it names after the path given, adding ".zip" to it.
+        with replacing(out / IMITATION_ARTIFACT, out / "tabnet.tmp.zip") as tmp:
+            clf.save_model(str(tmp.with_suffix("")))
+        shutil.rmtree(out / "tabnet.tmp", ignore_errors=True)
     stats = {
         "valid_accuracy": accuracy,
         "train_rows": len(x_fit),
@@ -145,4 +142,4 @@ def train_il(cfg: RunConfig, expert: Path, out: Path, seed: int = 0, resume: boo
             "valid_accuracy": accuracy,
         },
     )
-    return out / TABNET_FILE
+    return out / IMITATION_ARTIFACT

@@ -30,6 +30,11 @@ TRAIN_IMITATION = "imitation"
 PLAYED = ""
 """``training`` of a built-in method: a planner or rule, played as it is."""
 
+PPO_ARTIFACT = "model.zip"
+"""The file that holds a PPO policy (SB3's save): a finished run's and each checkpoint's."""
+IMITATION_ARTIFACT = "tabnet.zip"
+"""The file that holds an imitation (TabNet) policy."""
+
 
 @dataclass(frozen=True)
 class Method:
@@ -48,7 +53,7 @@ class Method:
     and the run needs an advisor)."""
     expert: str = ""
     """Imitation: the method whose finished run of the same seed it learns from."""
-    artifact: str = "model.zip"
+    artifact: str = PPO_ARTIFACT
     """The file of a finished run that holds the policy."""
     paper: bool = True
     """A method of the paper's tables (the others come after them in reports)."""
@@ -125,7 +130,7 @@ METHODS: dict[str, Method] = {
             "IL",
             training=TRAIN_IMITATION,
             expert="ppo-ewri",
-            artifact="tabnet.zip",
+            artifact=IMITATION_ARTIFACT,
             options=("expert",),
         ),  # fmt: skip
         Method("pirl", "PIRL", advised=True, options=("advisor", "student")),

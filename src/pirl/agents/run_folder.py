@@ -9,7 +9,6 @@ overwriting, resuming, and the lock that keeps one writer per folder.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import shutil
@@ -21,9 +20,11 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from filelock import FileLock, Timeout
 
+from pirl._atomic import write_json
 from pirl.agents import checkpoint
-from pirl.agents.methods import METHODS
+from pirl.agents.methods import IMITATION_ARTIFACT, METHODS, PPO_ARTIFACT
 from pirl.agents.methods import method as method_entry
 from pirl.config.errors import ConfigError, UserError
 from pirl.config.run import RunConfig
@@ -39,45 +40,55 @@ def train_seed_base(seed: int) -> int:
 
 LOCK_NAME = ".pirl.lock"
 """The lock file in a run or output folder; it holds the writing process's PID."""
-_HELD: dict[tuple[int, str], int] = {}  # (pid, folder) -> descriptor holding the lock
+_HELD: dict[tuple[int, str], FileLock] = {}  # (pid, folder) -> the lock this process holds
 
 
 class FolderBusy(ConfigError):
     """Another live process writes to the folder (exit code 2, like every user mistake)."""
 
 
+def _stamp_pid(fd: int) -> None:
+    """Write this process's PID into the lock file it now holds, for a refused writer's message."""
+    os.ftruncate(fd, 0)
+    os.lseek(fd, 0, os.SEEK_SET)
+    os.write(fd, f"{os.getpid()}\n".encode())
+
+
 def lock_folder(folder: Path, what: str = "run folder") -> None:
     """Become the one writer of ``folder`` (which must exist) until this process ends or
     :func:`release_folder`; raise :class:`FolderBusy` naming the holder's PID otherwise.
 
-    ``fcntl.flock`` on ``folder/.pirl.lock``: the kernel drops the lock when its holder dies,
-    so a run killed with ``kill -9`` never leaves a stale lock. Taking it again in the same
-    process is a no-op.
+    A native :class:`filelock.FileLock` (``flock``) on ``folder/.pirl.lock``: the kernel drops
+    the lock when its holder dies, so a run killed with ``kill -9`` never leaves a stale lock.
+    Taking it again in the same process is a no-op.
     """
     key = (os.getpid(), str(Path(folder).resolve()))
     if key in _HELD:
         return
     path = Path(folder) / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    # preserve_lock_file and on_acquired also refuse filelock's soft (PID file) fallback, which
+    # a kill -9 would leave behind as a stale lock.
+    lock = FileLock(path, mode=0o644, thread_local=False, preserve_lock_file=True,
+                    on_acquired=_stamp_pid)  # fmt: skip
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = os.read(fd, 64).decode(errors="replace").strip() or "unknown"
-        os.close(fd)
+        lock.acquire(timeout=0)
+    except Timeout:
+        try:
+            holder = path.read_text(errors="replace").strip() or "unknown"
+        except OSError:
+            holder = "unknown"
         raise FolderBusy(
             f"{what} {folder} is in use by another pirl process (PID {holder}); wait for it "
             "to end (or stop it), or choose another --out"
         ) from None
-    os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
-    _HELD[key] = fd
+    _HELD[key] = lock
 
 
 def release_folder(folder: Path) -> None:
     """Give up the lock this process holds on ``folder`` (if any)."""
-    fd = _HELD.pop((os.getpid(), str(Path(folder).resolve())), None)
-    if fd is not None:
-        os.close(fd)  # closing the descriptor releases the flock
+    lock = _HELD.pop((os.getpid(), str(Path(folder).resolve())), None)
+    if lock is not None:
+        lock.release(force=True)
 
 
 @contextlib.contextmanager
@@ -186,13 +197,6 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return (sha + ("-dirty" if dirty else "")) if sha else "unknown"
-
-
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON atomically (temporary file, then rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
-    os.replace(tmp, path)
 
 
 _RESUME_STOP = "; resume takes the run's own settings (leave the option out) or choose a new --out"
@@ -398,7 +402,7 @@ class RunFolder:
         """Path, mtime and size of the policy files: a model trained again into the same
         folder is a new policy, never a cached old one."""
         ident = []
-        for name in ("model.zip", "tabnet.zip", self.META):
+        for name in (PPO_ARTIFACT, IMITATION_ARTIFACT, self.META):
             path = self.path / name
             try:
                 st = path.stat()
@@ -439,7 +443,7 @@ class RunFolder:
         self.config_file.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
 
     def write_meta(self, meta: dict[str, Any]) -> None:
-        write_json(self.meta_file, meta)
+        write_json(self.meta_file, meta, sort_keys=True, default=str)
 
     def write_advisor_stats(self, stats: dict[str, Any]) -> None:
-        write_json(self.advisor_stats_file, stats)
+        write_json(self.advisor_stats_file, stats, sort_keys=True, default=str)

@@ -21,7 +21,6 @@
 from __future__ import annotations
 
 import csv
-import os
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -33,8 +32,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
+from pirl._atomic import replacing
 from pirl.agents import checkpoint
-from pirl.agents.methods import METHODS, PPO_METHODS, TRAIN_PPO, Method
+from pirl.agents.methods import METHODS, PPO_ARTIFACT, PPO_METHODS, TRAIN_PPO, Method
 from pirl.agents.run_folder import (
     RunFolder,
     git_commit,
@@ -108,7 +108,7 @@ def check_resume(run: RunFolder, method: str, cfg: RunConfig, seed: int, log: An
     if not run.path.is_dir():
         raise ConfigError(f"--resume: run folder {run.path} does not exist")
     if not run.meta_file.is_file() or not run.has_config:
-        if checkpoint.latest(run.checkpoints) is None and not (run.path / "model.zip").exists():
+        if checkpoint.latest(run.checkpoints) is None and not (run.path / PPO_ARTIFACT).exists():
             return cfg  # stopped before the run was recorded: nothing to continue, start it
         raise ConfigError(f"--resume: {run.path} is not a run folder (no meta.json or config.yaml)")
     run.check_resumes(method, seed)
@@ -365,7 +365,7 @@ def train(
         if done is not None and done >= cfg.train.total_steps:
             log(f"{out} is already complete ({done:,} steps); give a larger --steps to extend it")
             release_folder(run.path)
-            return run.path / "model.zip"
+            return run.path / entry.artifact
     total = whole_steps(cfg, cfg.train.total_steps)
     if total != cfg.train.total_steps:
         log(
@@ -457,10 +457,9 @@ def _finish(
 ) -> Path:
     """Write the final model (atomically), the advisor's statistics, and mark the run
     complete; a mostly unshaped PIRL run is PPO-EWRI under PIRL's name, so it says so."""
-    final = run.path / "model.zip"
-    tmp = run.path / "model.tmp.zip"
-    checkpoint.save_model(model, tmp)
-    os.replace(tmp, final)
+    final = run.path / PPO_ARTIFACT
+    with replacing(final, run.path / "model.tmp.zip") as tmp:  # SB3 adds ".zip" to other names
+        checkpoint.save_model(model, tmp)
     if stack.pare is not None:
         from pirl.agents.pirl_advice import unshaped_warning
 

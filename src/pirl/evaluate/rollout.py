@@ -9,6 +9,7 @@ from pathlib import Path
 import imageio.v2 as imageio
 import numpy as np
 
+from pirl._atomic import write_atomic
 from pirl.agents.loading import LearnedPolicy, act_rng
 from pirl.agents.policy import Policy
 from pirl.config.errors import ConfigError
@@ -104,13 +105,7 @@ def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 12) -> Path:
     # instead of again from the GIF writer's finaliser.
     data = imageio.mimwrite("<bytes>", frames, format="GIF", duration=1000 / fps, loop=0)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.gif")
-    try:
-        tmp.write_bytes(data)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_atomic(path, data, path.with_name(path.name + ".tmp.gif"))
 
 
 def check_gif_target(path: Path, fps: int) -> None:

@@ -14,7 +14,6 @@ import contextlib
 import csv
 import logging
 import math
-import os
 from collections import defaultdict
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -22,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl._atomic import replacing
 from pirl.config.errors import ConfigError
 from pirl.config.run import PareSettings
 from pirl.pare.stats import RunStats
@@ -248,13 +248,11 @@ def write_summary(records: list[dict[str, Any]], path: Path) -> list[dict[str, A
     rows = summarize(records)
     for line in unshaped_warnings(rows):
         log.warning(line)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as fh:
+    with replacing(path) as tmp, open(tmp, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: _fmt(v) for k, v in row.items()})
-    os.replace(tmp, path)
     return rows
 
 

@@ -12,9 +12,12 @@ Needs no Webots to run (text only); the world targets Webots R2023b (ENU coordin
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from pathlib import Path
+
+import jinja2
 
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
@@ -65,7 +68,8 @@ def world_text(
     config_path: str | Path | None = None,
     log_path: str = "pirl_webots_episodes.jsonl",
 ) -> str:
-    """The .wbt text of scenario ``seed`` (see the module doc)."""
+    """The .wbt text of scenario ``seed`` (see the module doc), rendered from
+    ``templates/world.wbt.j2``."""
     physics = physics or PhysicsConfig(cell_size_m=2.0, level_height_m=2.0, body_radius_m=0.25)
     mission = Mission(env_cfg, physics)
     mission.reset(seed)
@@ -83,85 +87,33 @@ def world_text(
     ]  # fmt: skip
     if config_path is not None:
         args += ["--config", str(config_path)]
-    lines = [f"#VRML_SIM {WEBOTS_VERSION} utf8", ""]
-    lines += [f'EXTERNPROTO "{_PROTO}/{p}"' for p in _EXTERNPROTOS]
-    lines += [
-        "",
-        "WorldInfo {",
-        "  info [",
-        f'    "PIRL scenario: size {sx}x{sy}x{sz}, seed {seed}, footprint {env_cfg.footprint}"',
-        f'    "cell {_f(cell)} m, level height {_f(physics.level_height_m)} m; written by pirl"',
-        "  ]",
-        f'  title "PIRL {sx}x{sy}x{sz} seed {seed}"',
-        "  basicTimeStep 8",
-        "  defaultDamping Damping {",
-        "    linear 0.5",
-        "    angular 0.5",
-        "  }",
-        '  coordinateSystem "ENU"',
-        "}",
-        "Viewpoint {",
-        # Looking down 45 degrees at the arena from its -x side (Webots cameras look along +x).
-        f"  orientation 0 1 0 {_f(math.pi / 4)}",
-        f"  position {_f(centre[0] - extent)} {_f(centre[1])} {_f(extent)}",
-        '  follow "Mavic 2 PRO"',
-        "}",
-        "TexturedBackground {",
-        "}",
-        "TexturedBackgroundLight {",
-        "}",
-        "Floor {",
-        f"  translation {_f(centre[0])} {_f(centre[1])} 0",
-        f"  size {_f(sx * cell)} {_f(sy * cell)}",
-        f"  tileSize {_f(cell)} {_f(cell)}",
-        "}",
-        "Mavic2Pro {",
-        f"  translation {_f(start[0])} {_f(start[1])} {_f(start[2])}",
-        "  rotation 0 0 1 0",
-        f'  controller "{CONTROLLER}"',
-        "  controllerArgs [",
-        *(f"    {json.dumps(a)}" for a in args),
-        "  ]",
-        # Supervisor: the controller can quit the simulation when the episode ends.
-        "  supervisor TRUE",
-        "  cameraSlot [",
-        "    Camera {",
-        f"      width {_WIDTH}",
-        f"      height {_HEIGHT}",
-        "      near 0.2",
-        f"      fieldOfView {_f(fov)}",
-        "      zoom CameraZoom {",
-        f"        minFieldOfView {_f(fov_min)}",
-        f"        maxFieldOfView {_f(fov_max)}",
-        "      }",
-        "    }",
-        "  ]",
-        "}",
-    ]
-    for k, (cx, cy, cz, r) in enumerate(mission.obstacle_spheres_m()):
-        lines += [
-            "Solid {",
-            f"  translation {_f(cx)} {_f(cy)} {_f(cz)}",
-            "  children [",
-            "    Shape {",
-            "      appearance PBRAppearance {",
-            "        baseColor 0.8 0.35 0.2",
-            "        roughness 0.7",
-            "        metalness 0",
-            "      }",
-            "      geometry Sphere {",
-            f"        radius {_f(r)}",
-            "        subdivision 3",
-            "      }",
-            "    }",
-            "  ]",
-            f'  name "obstacle {k}"',
-            "  boundingObject Sphere {",
-            f"    radius {_f(r)}",
-            "  }",
-            "}",
-        ]
-    return "\n".join(lines) + "\n"
+    return _template().render(
+        version=WEBOTS_VERSION,
+        protos=[f"{_PROTO}/{p}" for p in _EXTERNPROTOS],
+        sx=sx, sy=sy, sz=sz, seed=seed, footprint=env_cfg.footprint,
+        cell=cell, level_height=physics.level_height_m, pi=math.pi,
+        centre=centre, extent=extent, start=start,
+        controller=CONTROLLER, args=args,
+        width=_WIDTH, height=_HEIGHT, fov=fov, fov_min=fov_min, fov_max=fov_max,
+        spheres=mission.obstacle_spheres_m(),
+    )  # fmt: skip
+
+
+@functools.cache
+def _template() -> jinja2.Template:
+    """``templates/world.wbt.j2``: numbers through ``n`` (:func:`_f`), strings through
+    ``json`` (Webots strings are JSON's; Jinja's ``tojson`` would escape HTML characters)."""
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("pirl.physics.webots", "templates"),
+        autoescape=False,  # a .wbt file, not HTML
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    env.filters["n"] = _f
+    env.filters["json"] = json.dumps
+    return env.get_template("world.wbt.j2")
 
 
 def write_world(
