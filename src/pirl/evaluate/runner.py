@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import math
 import multiprocessing as mp
-import os
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
@@ -24,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl import _quiet
+from pirl._atomic import replacing
 from pirl.advice.registry import DEFAULT_ADVISOR, builtin_of_label, find_advisor_kind
 from pirl.agents.loading import ACT_MODES, BUILTIN, check_act
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, advised_key, asks, is_advised_key, label
@@ -461,11 +461,9 @@ def _check_observations(plan: EvalPlan) -> None:
 
 
 def _write_jsonl(path: Path, records: Iterable[dict[str, Any]]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as fh:
+    with replacing(path) as tmp, open(tmp, "w") as fh:
         for record in records:
             fh.write(json.dumps(record, sort_keys=True) + "\n")
-    os.replace(tmp, path)
 
 
 def evaluate_runs(

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl._atomic import write_atomic
 from pirl.config.errors import ConfigError, UserError
 from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
@@ -433,9 +434,7 @@ def _write(path: Path, text: str) -> None:
         found = stale.match(old.name)
         if found and not pid_alive(int(found.group(1))):
             old.unlink(missing_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    write_atomic(path, text, path.with_name(f".{path.name}.{os.getpid()}.tmp"))
 
 
 __all__ = ["FileFollower", "FlightFiles", "Op", "fly_files", "fly_mission", "read_flight"]

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pirl._atomic import replacing
 from pirl.config.world import VCPPConfig
 from pirl.world.seeable import REASONS, Seeability, analyse, lens_for
 from pirl.world.site import Site, load_site
@@ -98,9 +98,8 @@ def picture(site: Site, seen: Seeability, path: Path, cell_px: int = 0) -> Path:
         draw.rectangle((4, y + 2, 14, y + 12), fill=COLOURS[key])
         draw.text((20, y), text, fill=(0, 0, 0))
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    canvas.save(tmp, format="PNG")
-    os.replace(tmp, path)
+    with replacing(path) as tmp:
+        canvas.save(tmp, format="PNG")
     return path
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from pirl.agents.methods import PPO_ARTIFACT
 from pirl.config.errors import ConfigError
 from pirl.config.grid import ZOOM_MAX10, ZOOM_MIN10
 from pirl.config.mission import DEFAULT_ORIGIN, MissionSettings
@@ -506,7 +507,7 @@ def mission_source(
         from pirl.evaluate.runner import run_label
 
         run = RunFolder(Path(policy))
-        if not (run.path / "model.zip").is_file() or not run.has_config:
+        if not (run.path / PPO_ARTIFACT).is_file() or not run.has_config:
             raise ConfigError(
                 f"--policy {policy}: not a finished run (no model.zip and config.yaml)"
             )

@@ -21,6 +21,7 @@ from typing import Any
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template, select_autoescape
 
+from pirl._atomic import write_atomic
 from pirl.agents.methods import PAPER_METHODS, is_advised_key, report_order
 from pirl.agents.run_folder import RunFolder
 from pirl.config.choices import PareMode, Sim
@@ -501,7 +502,5 @@ def write_report(
         configs=[(name, path.read_text()) for name, path in configs if path.is_file()],
     )
     out = folder / "report.html"
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(page)
-    tmp.replace(out)
+    write_atomic(out, page)
     return out
