@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pirl.agents.runs import method_steps, train_one, train_run
+from pirl.agents.runs import train_one, train_run
+from pirl.agents.settings import method_steps
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.reproduce.plan import check_reproduce, make_plan, plan_runs, steps_text

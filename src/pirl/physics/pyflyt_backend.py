@@ -31,7 +31,7 @@ from pirl.agents.policy import Policy
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
 from pirl.physics.flight import Mission, Pose, normalized_power
-from pirl.world.metrics import PathTail
+from pirl.world.metrics import Milestone, PathTail
 
 # PyBullet calls made every physics step. BulletClient resolves them through __getattr__ with
 # inspect and functools on every call, 10-20% of a step's time; binding them once
@@ -244,7 +244,7 @@ def run_physics_episode(
     mission = Mission(env_cfg, physics or PhysicsConfig())
     obs, info = mission.reset(seed)
     policy.reset(mission.world, 0, seed=seed)
-    tail = PathTail(1)
+    tail, near = PathTail(1), Milestone(1)
     with PyFlytFlight(mission) as flight:
         done = False
         while not done:
@@ -252,8 +252,9 @@ def run_physics_episode(
             pose = flight.fly(mission)
             obs, terminated, truncated, info = mission.end_step(pose)
             tail.record(mission.world)
+            near.record(mission.world)
             done = terminated or truncated
-    return {**mission.metrics(), "tail_cells": tail.distinct(0)}
+    return {**mission.metrics(), "tail_cells": tail.distinct(0), "steps_to_99": near.steps(0)}
 
 
 __all__ = ["PyFlytFlight", "run_physics_episode"]
