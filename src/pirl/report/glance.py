@@ -238,18 +238,27 @@ def _verdict_finding(
     ])  # fmt: skip
 
 
-def _planner_finding(rows: list[dict[str, Any]], act: str, names: Mapping[str, str]) -> str | None:
-    """How close the best learned method comes to the planner, per world, in VCR and steps."""
+def _best_against_planner(
+    rows: list[dict[str, Any]], act: str
+) -> list[tuple[str, dict[str, Any], dict[str, Any]]]:
+    """Per grid world with a planner row and a learned one: (world, the planner's row, the
+    learned row with the highest VCR), in size order."""
     grid = [r for r in act_rows(rows, act) if r["sim"] == "grid"]
-    best: dict[str, str] = {}
-    vcrs, planner_vcrs, ratios = [], [], []
+    out = []
     for world in sorted({r["size"] for r in grid}, key=size_key):
         here = [r for r in grid if r["size"] == world]
         planner = next((r for r in here if is_planner(r["method"])), None)
         learned = [r for r in here if r.get("act") != "fixed"]
-        if planner is None or not learned:
-            continue
-        top = max(learned, key=_vcr)
+        if planner is not None and learned:
+            out.append((world, planner, max(learned, key=_vcr)))
+    return out
+
+
+def _planner_finding(rows: list[dict[str, Any]], act: str, names: Mapping[str, str]) -> str | None:
+    """How close the best learned method comes to the planner, per world, in VCR and steps."""
+    best: dict[str, str] = {}
+    vcrs, planner_vcrs, ratios = [], [], []
+    for world, planner, top in _best_against_planner(rows, act):
         best[world] = names.get(top["method"], top["label"])
         vcrs.append(_vcr(top))
         planner_vcrs.append(_vcr(planner))
@@ -359,15 +368,8 @@ def summary_lines(
             f"interval that excludes 0.5{why}; training seeds per PIRL row: "
             f"{', '.join(map(str, seeds))}, more seeds narrow the intervals."
         )
-    grid = [r for r in act_rows(rows, act) if r["sim"] == "grid"]
     gaps = []
-    for size in sorted({r["size"] for r in grid}, key=size_key):
-        here = [r for r in grid if r["size"] == size]
-        planner = next((r for r in here if is_planner(r["method"])), None)
-        learned = [r for r in here if r.get("act") != "fixed"]
-        if planner is None or not learned:
-            continue
-        top = max(learned, key=_vcr)
+    for size, planner, top in _best_against_planner(rows, act):
         gaps.append(
             f"on {size} {top['label']} reaches VCR {_vcr(top):.2f} (IQM over seeds) in "
             f"{top.get('steps_mean', math.nan):.0f} steps, the planner "
