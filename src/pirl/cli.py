@@ -62,11 +62,7 @@ def render(
     ] = None,
 ) -> None:
     """Fly one episode with a simple policy and write it as an animated GIF."""
-    from pirl.env import VCPPEnv
-    from pirl.env.render import cell_pixels
-    from pirl.evaluate import run_episode, save_gif
-    from pirl.evaluate.rollout import check_gif_target
-    from pirl.world.memory import check_memory
+    from pirl.evaluate.rollout import check_gif_target, record_gif
 
     check_seed(seed)
     check_gif_target(out, fps)
@@ -75,11 +71,7 @@ def render(
         from pirl.world.seeable import with_site
 
         cfg = with_site(cfg, str(site))
-    px = cell_pixels(cfg.size, cfg.render_cell_px)
-    check_memory(cfg, 1, per_step_bytes=cfg.size[0] * cfg.size[1] * px * px * 3)
-    env = VCPPEnv(cfg, render_mode="rgb_array")
-    result = run_episode(env, make_policy(policy, seed), seed, record=True)
-    path = save_gif(result.frames, out, fps=fps)
+    result, path = record_gif(cfg, make_policy(policy, seed), seed, out, fps)
     console.print(metrics_table([(policy, result.metrics)], f"{cfg.size} seed {seed}"))
     console.print(f"wrote {path} ({len(result.frames)} frames)")
 
@@ -538,11 +530,6 @@ def webots_world(
     # section as a file of its own, by absolute path (Webots runs it in its own folder).
     env_file = out.with_name(f"{out.stem}.env.yaml").resolve() if config else None
     written = write_world(out, cfg, seed, physics, policy, env_file, controller)
-    if env_file is not None:
-        import yaml
-
-        env_file.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-        written.append(env_file)
     for path in written:
         console.print(f"wrote {path}")
     console.print("open the world in Webots (R2023b or later); see docs/physics.md")

@@ -94,6 +94,22 @@ def run_batch(cfg: VCPPConfig, policy: LearnedPolicy, seeds: list[int]) -> list[
     return [m for m in metrics if m is not None]
 
 
+def record_gif(
+    cfg: VCPPConfig, policy: Policy, seed: int, out: str | Path, fps: int = 12
+) -> tuple[EpisodeResult, Path]:
+    """``pirl render``: one episode of ``policy`` on scenario ``seed`` as an animated GIF at
+    ``out``; refused before it flies when the GIF cannot be written or its frames would not
+    fit in memory. Returns the episode and the GIF's path."""
+    from pirl.env.render import cell_pixels
+    from pirl.world.memory import check_memory
+
+    check_gif_target(Path(out), fps)
+    px = cell_pixels(cfg.size, cfg.render_cell_px)
+    check_memory(cfg, 1, per_step_bytes=cfg.size[0] * cfg.size[1] * px * px * 3)
+    result = run_episode(VCPPEnv(cfg, render_mode="rgb_array"), policy, seed, record=True)
+    return result, save_gif(result.frames, out, fps=fps)
+
+
 def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 12) -> Path:
     """Write frames as an animated GIF (parent folders created); returns the path.
 

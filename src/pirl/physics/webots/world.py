@@ -125,7 +125,8 @@ def write_world(
     config_path: str | Path | None = None,
     controller: bool = True,
 ) -> list[Path]:
-    """Write the world (and, with ``controller``, its controller shim); the paths written.
+    """Write the world (and, with ``controller``, its controller shim; with ``config_path``,
+    the env settings there for the controller to read); the paths written.
 
     The shim goes to ``<project>/controllers/pirl_mavic/``, where ``<project>`` is the parent
     of the world's ``worlds`` folder (Webots' layout), else the world's own folder.
@@ -135,6 +136,11 @@ def write_world(
     text = world_text(env_cfg, seed, physics, policy, config_path)
     out.write_text(text)
     written = [out]
+    if config_path is not None:  # the env settings the controller reads (its own --config)
+        import yaml
+
+        Path(config_path).write_text(yaml.safe_dump(env_cfg.to_dict(), sort_keys=False))
+        written.append(Path(config_path))
     if controller:
         project = out.parent.parent if out.parent.name == "worlds" else out.parent
         shim = project / "controllers" / CONTROLLER / f"{CONTROLLER}.py"
