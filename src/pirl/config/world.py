@@ -54,7 +54,12 @@ EWRI_RANGES = (
 )
 """The EWRI (low, high) uniform ranges, in the order of REWARD_TERMS."""
 
-OBS_BLOCKS = ("obs_visits", "obs_target", "obs_target_path", "obs_stall")
+MAX_UAVS = 62
+"""Most UAVs per world (the fleet step keeps one bit per UAV in a 64-bit integer)."""
+MAX_TEAMMATES_OBS = 8
+"""Most teammates an observation can hold."""
+
+OBS_BLOCKS = ("obs_visits", "obs_target", "obs_target_path", "obs_stall", "obs_teammates")
 """The settings of the observation's optional blocks: a trained policy acts only with the
 blocks it was trained with."""
 
@@ -175,6 +180,15 @@ class VCPPConfig(Settings, section="env"):
     ``pirl.world.dynamics.action_mask``). A rule of the env that ends any loop, for every
     method and act mode alike; episode rows count the steps it chose (``guarded_steps``).
     0 (off) is the paper's environment."""
+    uavs: int = 1
+    """UAVs flying together in each world, a fleet (docs/fleets.md): they share the map and
+    its coverage, each with its own pose, camera, battery, visits and wind; UAV 1 starts at
+    the drawn start, its teammates at the free cells nearest to it. 1 is the paper's task."""
+    obs_teammates: int = 0
+    """Add the nearest this-many teammates to the observation, 6 values each (present, x, y
+    and z relative to the UAV, cells in their footprint now, battery), zeros where fewer fly:
+    the same size for any fleet, so a policy trained at one size acts at another. 0 is the
+    paper's observation."""
     render_cell_px: int = 0
     """Pixels per cell in rgb_array renders; 0 picks a size near 480 pixels."""
     max_memory_gb: float = 0.0
@@ -258,6 +272,10 @@ class VCPPConfig(Settings, section="env"):
             raise self.refuse("obs_visits_cap", "must be >= 1")
         if self.stall_guard < 0:
             raise self.refuse("stall_guard", "must be >= 0 (0: off)")
+        if not 1 <= self.uavs <= MAX_UAVS:
+            raise self.refuse("uavs", f"must be a whole number of UAVs in [1, {MAX_UAVS}]")
+        if not 0 <= self.obs_teammates <= MAX_TEAMMATES_OBS:
+            raise self.refuse("obs_teammates", f"allowed range is [0, {MAX_TEAMMATES_OBS}]")
         if self.obs_target_path and not self.obs_target:
             raise self.refuse("obs_target_path", "needs obs_target: true (it changes that block)")
         if len(self.static_weights) != len(REWARD_TERMS):

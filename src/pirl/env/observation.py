@@ -26,7 +26,13 @@ next 3 (obs_target)   scalars      to the nearest coverable cell not yet covered
                                    (the straight line when none is reachable at that altitude)
 ====================  ===========  ==========================================================
 
-The last three blocks are off by default (the paper's observation: 317 values).
+next 6*M (obs_teammates = M)   the M teammates nearest to the UAV (fleets), nearest first,
+                                   6 values each: 1 (present), (dx/(X-1) + 1)/2,
+                                   (dy/(Y-1) + 1)/2, (dz/(Z-1) + 1)/2, cells in its
+                                   footprint now / largest footprint, battery; zeros where
+                                   fewer teammates fly (or none: one UAV)
+
+The optional blocks are off by default (the paper's observation: 317 values).
 """
 
 from __future__ import annotations
@@ -37,10 +43,11 @@ import numba
 import numpy as np
 
 from pirl.config.world import VCPPConfig
-from pirl.world.dynamics import BATCH_KERNEL, path_to_work
+from pirl.world.dynamics import BATCH_KERNEL, fleet_size, path_to_work, world_of
 
 N_SCALARS = 11
 N_TARGET = 3
+N_TEAMMATE = 6  # values per teammate in the obs_teammates block
 STALL_RANGE = 32.0  # steps: the stall scalar saturates here
 TARGET_RANGE = 16.0  # cells: the distance feature saturates here, whatever the world size
 # Bits of ObsLayout.extras: which optional blocks the observation has.
@@ -56,6 +63,8 @@ class ObsLayout(NamedTuple):
     """Bits ``EXTRA_*`` of the optional blocks present."""
     visits_cap: int
     """Visit count at which the visits window saturates."""
+    teammates: int
+    """Teammates in the observation (``obs_teammates``; 0: no block)."""
 
 
 def obs_size(
@@ -64,16 +73,24 @@ def obs_size(
     visits: bool = False,
     target: bool = False,
     stall: bool = False,
+    teammates: int = 0,
 ) -> int:
     """Length of the observation vector."""
     n = 2 * window * window + global_side * global_side + N_SCALARS
     n += (window * window if visits else 0) + (1 if stall else 0)
-    return n + (N_TARGET if target else 0)
+    return n + (N_TARGET if target else 0) + N_TEAMMATE * teammates
 
 
 def obs_size_for(cfg: VCPPConfig) -> int:
     """Length of the observation vector of an environment config."""
-    return obs_size(cfg.obs_window, cfg.obs_global, cfg.obs_visits, cfg.obs_target, cfg.obs_stall)
+    return obs_size(
+        cfg.obs_window,
+        cfg.obs_global,
+        cfg.obs_visits,
+        cfg.obs_target,
+        cfg.obs_stall,
+        cfg.obs_teammates,
+    )
 
 
 def obs_layout(cfg: VCPPConfig) -> ObsLayout:
@@ -84,7 +101,9 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
         | (EXTRA_PATH if cfg.obs_target_path else 0)
         | (EXTRA_STALL if cfg.obs_stall else 0)
     )
-    return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap))
+    return ObsLayout(
+        int(cfg.obs_window), extras, int(cfg.obs_visits_cap), int(cfg.obs_teammates)
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -125,6 +144,7 @@ def observation(w, p, layout, e, out):
         w.blk_total,
     )
     st = w.status[e]
+    m = world_of(w, e)  # the world: map and coverage rows
     sx, sy, sz = p.size_x, p.size_y, p.size_z
     g = blk_todo.shape[1]
     window, extras = layout.window, layout.extras
@@ -136,8 +156,8 @@ def observation(w, p, layout, e, out):
     for i in range(x - half, x + half + 1):
         for j in range(y - half, y + half + 1):
             if 0 <= i < sx and 0 <= j < sy:
-                o[k] = 1.0 if (coverable[e, i, j] and views[e, i, j] == 0) else 0.0
-                o[ww + k] = 1.0 if blocked[e, i, j, z] else 0.0
+                o[k] = 1.0 if (coverable[m, i, j] and views[m, i, j] == 0) else 0.0
+                o[ww + k] = 1.0 if blocked[m, i, j, z] else 0.0
             else:
                 o[k] = 0.0
                 o[ww + k] = 1.0
@@ -145,8 +165,8 @@ def observation(w, p, layout, e, out):
     k = 2 * ww
     for bi in range(g):
         for bj in range(g):
-            t = blk_total[e, bi, bj]
-            o[k] = blk_todo[e, bi, bj] / t if t > 0 else 0.0
+            t = blk_total[m, bi, bj]
+            o[k] = blk_todo[m, bi, bj] / t if t > 0 else 0.0
             k += 1
     o[k] = x / (sx - 1)
     o[k + 1] = y / (sy - 1)
@@ -158,8 +178,8 @@ def observation(w, p, layout, e, out):
     cov = st["coverable"]
     o[k + 7] = st["covered"] / cov if cov > 0 else 1.0
     o[k + 8] = max(0.0, (p.step_limit - st["steps"]) / p.step_limit)
-    o[k + 9] = 1.0 if (z + 1 >= sz or blocked[e, x, y, z + 1]) else 0.0
-    o[k + 10] = 1.0 if (z - 1 < 0 or blocked[e, x, y, z - 1]) else 0.0
+    o[k + 9] = 1.0 if (z + 1 >= sz or blocked[m, x, y, z + 1]) else 0.0
+    o[k + 10] = 1.0 if (z - 1 < 0 or blocked[m, x, y, z - 1]) else 0.0
     k += N_SCALARS
     if extras & EXTRA_VISITS:
         cap = layout.visits_cap
@@ -172,24 +192,70 @@ def observation(w, p, layout, e, out):
         o[k] = min(st["steps"] - w.progress[e], STALL_RANGE) / STALL_RANGE
         k += 1
     if extras & EXTRA_TARGET:
-        moves = -1
-        if extras & EXTRA_PATH and not (coverable[e, x, y] and views[e, x, y] == 0):
-            dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy, 0)
-        if moves > 0:
-            o[k] = (dx + 1.0) / 2.0
-            o[k + 1] = (dy + 1.0) / 2.0
-            o[k + 2] = min(moves, TARGET_RANGE) / TARGET_RANGE
+        _target(w, p, layout, e, o[k : k + N_TARGET])
+        k += N_TARGET
+    if layout.teammates > 0:
+        _teammates(w, p, layout.teammates, e, o[k : k + N_TEAMMATE * layout.teammates])
+
+
+@numba.njit(cache=True, inline="always")
+def _target(w, p, layout, e, o):
+    """The obs_target block of slot e into ``o`` (3 values)."""
+    coverable, views = w.coverable, w.views
+    m = world_of(w, e)
+    st = w.status[e]
+    x, y, z = st["x"], st["y"], st["z"]
+    sx, sy = p.size_x, p.size_y
+    moves = -1
+    if layout.extras & EXTRA_PATH and not (coverable[m, x, y] and views[m, x, y] == 0):
+        dx, dy, moves = path_to_work(w, e, x, y, z, sx, sy, 0)
+    if moves > 0:
+        o[0] = (dx + 1.0) / 2.0
+        o[1] = (dy + 1.0) / 2.0
+        o[2] = min(moves, TARGET_RANGE) / TARGET_RANGE
+        return
+    # The straight line: without obs_target_path, or when no way is open at this altitude
+    # (when a way is open the search alone runs: the hot path does one pass, not two).
+    best, bi, bj = nearest_work(coverable[m], views[m], x, y)
+    if best <= 0:  # none left, or the UAV is above one
+        o[0], o[1], o[2] = 0.5, 0.5, 0.0
+    else:
+        d = np.sqrt(best)
+        o[0] = ((bi - x) / d + 1.0) / 2.0
+        o[1] = ((bj - y) / d + 1.0) / 2.0
+        o[2] = min(d, TARGET_RANGE) / TARGET_RANGE
+
+
+@numba.njit(cache=True, inline="always")
+def _teammates(w, p, count, e, o):
+    """The obs_teammates block of slot e into ``o``: its ``count`` nearest teammates still
+    flying (squared distance in cells; on a tie the lower UAV number), zeros after them."""
+    o[:] = 0.0
+    k = fleet_size(w)
+    first = (e // k) * k
+    st = w.status[e]
+    x, y, z = st["x"], st["y"], st["z"]
+    taken = 0  # bit u: teammate u already written
+    for slot in range(min(count, k - 1)):
+        best, pick = -1, -1
+        for t in range(first, first + k):
+            if t == e or w.left[t] or taken & (1 << (t - first)):
+                continue
+            tt = w.status[t]
+            d2 = (tt["x"] - x) ** 2 + (tt["y"] - y) ** 2 + (tt["z"] - z) ** 2
+            if best < 0 or d2 < best:
+                best, pick = d2, t
+        if pick < 0:
             return
-        # The straight line: without obs_target_path, or when no way is open at this altitude
-        # (when a way is open the search alone runs: the hot path does one pass, not two).
-        best, bi, bj = nearest_work(coverable[e], views[e], x, y)
-        if best <= 0:  # none left, or the UAV is above one
-            o[k], o[k + 1], o[k + 2] = 0.5, 0.5, 0.0
-        else:
-            d = np.sqrt(best)
-            o[k] = ((bi - x) / d + 1.0) / 2.0
-            o[k + 1] = ((bj - y) / d + 1.0) / 2.0
-            o[k + 2] = min(d, TARGET_RANGE) / TARGET_RANGE
+        taken |= 1 << (pick - first)
+        tt = w.status[pick]
+        b = N_TEAMMATE * slot
+        o[b] = 1.0
+        o[b + 1] = ((tt["x"] - x) / (p.size_x - 1) + 1.0) / 2.0
+        o[b + 2] = ((tt["y"] - y) / (p.size_y - 1) + 1.0) / 2.0
+        o[b + 3] = ((tt["z"] - z) / max(1, p.size_z - 1) + 1.0) / 2.0
+        o[b + 4] = min(1.0, w.seen_now[pick] / p.max_footprint)
+        o[b + 5] = min(1.0, max(0.0, w.energy[pick] / p.capacity))
 
 
 @numba.njit(**BATCH_KERNEL)

@@ -5,6 +5,13 @@ kernels, so they cannot disagree. Every kernel reads the worlds' state from one
 :class:`~pirl.world.state.WorldArrays` ``w`` (per-world records ``w.status`` and ``w.flags``
 with named fields, bookkeeping grids with the batch as first axis) and the fixed settings from
 one :class:`~pirl.world.state.Params` ``p``.
+
+**Slots.** A world holds K UAVs (``env.uavs``; 1 is the paper's task). The per-UAV arrays
+(pose, camera, counters, battery, wind stream, visits, ...) have one row per *slot*, the
+(world, UAV) pair ``e = world * K + uav``; the map and the coverage bookkeeping (``blocked``,
+``occluding``, ``coverable``, ``views``, ``redmask``, ``blk_*``) have one row per world, read
+at :func:`world_of`. With K = 1 a slot is its world, and every rule reads exactly as it did
+for one UAV.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ X_PLUS, X_MINUS, Y_PLUS, Y_MINUS, Z_PLUS, Z_MINUS = 0, 1, 2, 3, 4, 5
 TILT_PLUS, TILT_MINUS, PAN_PLUS, PAN_MINUS, ZOOM_PLUS, ZOOM_MINUS = 6, 7, 8, 9, 10, 11
 N_MOVES = 6  # actions below N_MOVES move the UAV, the others steer the camera
 N_ACTIONS = 12
+PARKED = TILT_PLUS  # the one action a UAV that has left keeps in its mask (never carried out)
 ACTION_NAMES = (
     "x+", "x-", "y+", "y-", "z+", "z-", "tilt+5", "tilt-5", "pan+15", "pan-15", "zoom+0.1",
     "zoom-0.1",
@@ -74,10 +82,44 @@ def _next_uniform(rng, e):
 
 
 @numba.njit(cache=True, inline="always")
-def free(blocked, p, e, x, y, z):
-    """Whether cell (x, y, z) of world e lies inside the grid and out of every obstacle."""
+def fleet_size(w):
+    """UAVs per world (K): the slots over the worlds, read off the arrays' first axes."""
+    return w.status.shape[0] // w.coverable.shape[0]
+
+
+@numba.njit(cache=True, inline="always")
+def world_of(w, e):
+    """The world of slot e: the row of the shared map and coverage arrays."""
+    return e // fleet_size(w)
+
+
+@numba.njit(cache=True, inline="always")
+def free(blocked, p, g, x, y, z):
+    """Whether cell (x, y, z) of world g lies inside the grid and out of every obstacle."""
     inside = 0 <= x < p.size_x and 0 <= y < p.size_y and 0 <= z < p.size_z
-    return inside and not blocked[e, x, y, z]
+    return inside and not blocked[g, x, y, z]
+
+
+@numba.njit(cache=True, inline="always")
+def held(w, e, x, y, z):
+    """Whether a teammate of slot e that is still flying holds cell (x, y, z) (never with one
+    UAV). Two UAVs never share a cell: the mask and the move read this."""
+    k = fleet_size(w)
+    if k == 1:
+        return False
+    first = (e // k) * k
+    for t in range(first, first + k):
+        if t != e and not w.left[t]:
+            st = w.status[t]
+            if st["x"] == x and st["y"] == y and st["z"] == z:
+                return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def open_cell(w, p, e, x, y, z):
+    """Whether slot e's UAV may fly into cell (x, y, z): free, and no teammate holds it."""
+    return free(w.blocked, p, world_of(w, e), x, y, z) and not held(w, e, x, y, z)
 
 
 @numba.njit(cache=True, inline="always")
@@ -90,28 +132,34 @@ def book_view(w, e, cells, mark_redundant):
     its footprint here; the physics evaluation books the union of a flight's views here too.
     """
     st = w.status[e]
+    g = world_of(w, e)
     coverable, views, redmask = w.coverable, w.views, w.redmask
     new = 0
     seen = 0
     for k in range(cells.shape[0]):
         i, j = cells[k, 0], cells[k, 1]
-        if not coverable[e, i, j]:
+        if not coverable[g, i, j]:
             continue
         seen += 1
-        v = views[e, i, j]
+        v = views[g, i, j]
         if v == 0:
             new += 1
-            w.blk_todo[e, w.block_x[i], w.block_y[j]] -= 1
+            w.blk_todo[g, w.block_x[i], w.block_y[j]] -= 1
         elif v == 1:
             st["multi_cells"] += 1
-        views[e, i, j] = v + 1
-    st["covered"] += new
+        views[g, i, j] = v + 1
+    # Coverage is the world's: every teammate's count grows (a fleet of one: this UAV's); the
+    # new cells are credited to the UAV that booked them first.
+    k = fleet_size(w)
+    for t in range(g * k, g * k + k):
+        w.status[t]["covered"] += new
+    w.credit[e] += new
     st["cell_views"] += seen
     if new == 0 and mark_redundant:
         for k in range(cells.shape[0]):
             i, j = cells[k, 0], cells[k, 1]
-            if coverable[e, i, j] and not redmask[e, i, j]:
-                redmask[e, i, j] = True
+            if coverable[g, i, j] and not redmask[g, i, j]:
+                redmask[g, i, j] = True
                 st["redundant_cells"] += 1
     return new
 
@@ -128,10 +176,12 @@ def observe(w, p, e, mark_redundant):
     """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
     st = w.status[e]
     buf = w.buf[e]
+    g = world_of(w, e)
     n = footprint_cells(
-        p, camera_pose(w, e), w.obstacles[e, : st["n_obstacles"]], w.occluding[e], buf
+        p, camera_pose(w, e), w.obstacles[g, : st["n_obstacles"]], w.occluding[g], buf
     )
     st["footprint_sum"] += n
+    w.seen_now[e] = n
     return book_view(w, e, buf[:n], mark_redundant)
 
 
@@ -156,12 +206,12 @@ def camera_action(w, e, a):
 
 
 @numba.njit(cache=True, inline="always")
-def _work_within(w, e, cx, cy, reach, sx, sy):
-    """Whether a coverable ground cell not yet covered lies within ``reach`` cells (the square
-    of half-width ``reach``) of (cx, cy)."""
+def _work_within(w, g, cx, cy, reach, sx, sy):
+    """Whether a coverable ground cell of world g not yet covered lies within ``reach`` cells
+    (the square of half-width ``reach``) of (cx, cy)."""
     for i in range(max(0, cx - reach), min(sx, cx + reach + 1)):
         for j in range(max(0, cy - reach), min(sy, cy + reach + 1)):
-            if w.coverable[e, i, j] and w.views[e, i, j] == 0:
+            if w.coverable[g, i, j] and w.views[g, i, j] == 0:
                 return True
     return False
 
@@ -178,6 +228,7 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
     cells a search reached are reset after it, so a search costs the cells it explores, not
     the grid (a 256 x 256 site)."""
     queue, seen = w.path[e, 0], w.path[e, 1]
+    g = world_of(w, e)
     start = x * sy + y
     seen[start] = 0
     queue[0] = start
@@ -186,7 +237,7 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
         c = queue[head]
         head += 1
         cx, cy = c // sy, c % sy
-        if c != start and _work_within(w, e, cx, cy, reach, sx, sy):
+        if c != start and _work_within(w, g, cx, cy, reach, sx, sy):
             m = seen[c] % 4
             found = MOVE_DX[m], MOVE_DY[m], seen[c] // 4
             for r in range(tail):
@@ -194,7 +245,7 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
             return found
         for m in range(4):
             nx, ny = cx + MOVE_DX[m], cy + MOVE_DY[m]
-            if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[e, nx, ny, z]:
+            if 0 <= nx < sx and 0 <= ny < sy and not w.blocked[g, nx, ny, z]:
                 k = nx * sy + ny
                 if seen[k] < 0:
                     # moves * 4 + the first move of the way (inherited past the start)
@@ -227,10 +278,15 @@ def action_mask(w, p, e, out):
     (docs/results.md, "The stall guard").
     """
     st = w.status[e]
-    blocked = w.blocked
+    if w.left[e]:
+        # A UAV that has left the episode (a fleet's): one action, which the step ignores;
+        # a masked policy's only choice carries no gradient.
+        out[e, :] = False
+        out[e, PARKED] = True
+        return
     x, y, z = st["x"], st["y"], st["z"]
     for a in range(N_MOVES):
-        out[e, a] = free(blocked, p, e, x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2])
+        out[e, a] = open_cell(w, p, e, x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2])
     out[e, TILT_PLUS] = st["tilt"] < TILT_MAX
     out[e, TILT_MINUS] = st["tilt"] > TILT_MIN
     out[e, PAN_PLUS] = st["pan"] < PAN_MAX
@@ -263,7 +319,7 @@ def guard_action(w, p, e):
         way = ZOOM_PLUS
     elif p.model == PAPER and st["tilt"] >= PAPER_NADIR_TILT:
         way = TILT_MINUS
-    elif free(w.blocked, p, e, x, y, z + 1):
+    elif open_cell(w, p, e, x, y, z + 1):
         way = Z_PLUS
     return way
 
@@ -360,6 +416,65 @@ def close_step(w, p, e, out):
 
 
 @numba.njit(cache=True, inline="always")
+def park(w, e):
+    """Book a step of slot e, whose UAV has left the episode: nothing happens, no reward
+    term, and the slot reports its end again (each such step is an episode of one step with
+    reward 0; the mask leaves one action, so a masked policy learns nothing from it)."""
+    w.terms[e, :] = 0.0
+    f = w.flags[e]
+    f["collision"] = 0
+    f["redundant"] = 0
+    f["idle"] = 0
+    f["terminated"] = 1
+    f["truncated"] = 0
+    f["wind"] = 0
+    f["new_cells"] = 0
+
+
+@numba.njit(cache=True, inline="always")
+def step_fleet(w, p, g, actions):
+    """Step every UAV of world g (``actions``: one per slot of the batch); return 1 when the
+    world's episode ended.
+
+    The UAVs move one after another, each seeing where the ones before it went: a move into
+    a cell a teammate took earlier in the step holds (a yield, not a collision), and a ground
+    cell that several UAVs see in one step is credited to the first. The order turns by one
+    every step (UAV ``t mod K`` first at step t), so no UAV is first more often than another.
+    A UAV leaves when its battery is spent or the fleet's coverage is complete; the episode
+    ends when every UAV has left or the step limit truncates the ones still flying.
+    """
+    k = fleet_size(w)
+    first = g * k
+    turn = w.clock[g]
+    w.clock[g] = turn + 1
+    parked = 0  # bit u: UAV u had left before this step (K <= MAX_UAVS)
+    for j in range(k):
+        u = (turn + j) % k
+        e = first + u
+        if w.left[e]:
+            park(w, e)
+            parked |= 1 << u
+        else:
+            step_one(w, p, e, actions[e])
+    complete = w.status[first]["covered"] >= w.status[first]["coverable"]
+    flying = 0
+    for u in range(k):
+        if parked & (1 << u):
+            continue
+        e = first + u
+        f = w.flags[e]
+        if complete and not f["terminated"]:
+            # The fleet finished on a later UAV's view: every UAV still flying ends here.
+            f["terminated"] = 1
+            f["truncated"] = 0
+        if f["terminated"]:
+            w.left[e] = True
+        elif not f["truncated"]:
+            flying += 1
+    return 1 if flying == 0 else 0
+
+
+@numba.njit(cache=True, inline="always")
 def step_one(w, p, e, a):
     """Apply action ``a`` (or the stall guard's, :func:`steer`) to world e; fill its ``terms``
     (raw reward terms) and ``flags``.
@@ -376,8 +491,11 @@ def step_one(w, p, e, a):
         a = steer(w, p, e, a)
     if a < N_MOVES:
         nx, ny, nz = x + MOVES[a, 0], y + MOVES[a, 1], z + MOVES[a, 2]
-        if free(w.blocked, p, e, nx, ny, nz):
+        if open_cell(w, p, e, nx, ny, nz):
             st["x"], st["y"], st["z"] = nx, ny, nz
+        elif held(w, e, nx, ny, nz) and free(w.blocked, p, world_of(w, e), nx, ny, nz):
+            # A teammate took the cell earlier in this step: the UAV holds, no collision.
+            w.yields[e] += 1
         else:
             collision = True
         if a < Z_PLUS:
@@ -395,7 +513,7 @@ def step_one(w, p, e, a):
     if p.wind_prob > 0.0 and _next_uniform(w.rng, e) < p.wind_prob:
         d = min(3, int(_next_uniform(w.rng, e) * 4.0))
         wx, wy = st["x"] + WIND_DIRS[d, 0], st["y"] + WIND_DIRS[d, 1]
-        if free(w.blocked, p, e, wx, wy, st["z"]):
+        if open_cell(w, p, e, wx, wy, st["z"]):
             st["x"], st["y"] = wx, wy
             wind = True
 

@@ -33,11 +33,12 @@ def memory_limit(cfg: VCPPConfig) -> int:
 
 def world_bytes(cfg: VCPPConfig) -> int:
     """The arrays of one world (what :class:`~pirl.world.state.WorldBatch` allocates per world):
-    per voxel ``blocked`` and ``occluding`` (1 byte each) and ``visits`` (4); per ground
-    cell ``coverable``, ``redmask`` (1 each), ``views`` (4) and the path-search scratch (8);
-    the rest is small."""
+    per voxel ``blocked`` and ``occluding`` (1 byte each) and each UAV's ``visits`` (4); per
+    ground cell ``coverable``, ``redmask`` (1 each), ``views`` (4) and each UAV's path-search
+    scratch (8); the rest is small."""
     sx, sy, sz = cfg.size
-    return sx * sy * sz * 6 + sx * sy * 14 + 64 * 1024
+    k = cfg.uavs
+    return sx * sy * sz * (2 + 4 * k) + sx * sy * (6 + 8 * k) + 64 * 1024 * k
 
 
 def longest_episode(cfg: VCPPConfig) -> int:
@@ -57,12 +58,13 @@ def check_memory(cfg: VCPPConfig, worlds: int = 1, per_step_bytes: int = 0) -> i
     (for example a rendered frame) besides its path; raise one ConfigError line when that is
     over :func:`memory_limit`."""
     grids = world_bytes(cfg) * worlds
-    recording = longest_episode(cfg) * (PATH_BYTES_PER_STEP + per_step_bytes) * worlds
+    recording = longest_episode(cfg) * (PATH_BYTES_PER_STEP * cfg.uavs + per_step_bytes) * worlds
     need, limit = grids + recording, memory_limit(cfg)
     if need > limit:
         size = "x".join(str(s) for s in cfg.size)
+        fleet = f" of {cfg.uavs} UAVs" if cfg.uavs > 1 else ""
         raise ConfigError(
-            f"world {size}: {worlds} world(s) need about {need / GB:.1f} GB (grids "
+            f"world {size}: {worlds} world(s){fleet} need about {need / GB:.1f} GB (grids "
             f"{grids / GB:.2f} GB, episode recording {recording / GB:.2f} GB), over the limit "
             f"of {limit / GB:.1f} GB (env.max_memory_gb; 0 = half of this machine's "
             f"{machine_memory() / GB:.0f} GB); choose a smaller size"

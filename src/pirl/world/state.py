@@ -12,6 +12,7 @@ per world, so a world reset with seed s is the same whether it lives alone or in
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -65,7 +66,7 @@ FLAGS_DTYPE = np.dtype(
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
     "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all", "progress",
-    "guarded",
+    "guarded", "left", "credit", "seen_now", "yields", "clock",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -78,20 +79,22 @@ def copy_records(records: np.ndarray) -> np.ndarray:
 
 
 class WorldArrays(NamedTuple):
-    """The arrays of N worlds of one size (first axis = world), as the kernels take them.
+    """The arrays of N worlds of one size holding K UAVs each, as the kernels take them.
 
-    The map (``blocked``, ``occluding``, ``coverable``, ``obstacles``) is kept apart from the
-    UAV's own state (``status``, ``energy``, ``rng``) and the task's bookkeeping (``views``,
-    ``redmask``, ``visits``, ``blk_*``).
+    The map (``blocked``, ``occluding``, ``coverable``, ``obstacles``) and the coverage
+    bookkeeping (``views``, ``redmask``, ``blk_*``) have one row per world; each UAV's own
+    state (``status``, ``energy``, ``rng``, ``visits``, ...) has one row per slot, the
+    (world, UAV) pair ``world * K + uav`` (:func:`pirl.world.dynamics.world_of`). With one UAV
+    (the paper's task) slots and worlds coincide.
     """
 
     status: np.ndarray
-    """(N,) records of :data:`STATUS_DTYPE`: pose, camera and counters. ``status[e]["x"]``
+    """(N*K,) records of :data:`STATUS_DTYPE`: pose, camera and counters. ``status[e]["x"]``
     reads and writes the same in numba and in plain Python (a record is a view)."""
     energy: np.ndarray
-    """(N,) battery energy units left."""
+    """(N*K,) battery energy units left."""
     rng: np.ndarray
-    """(N,) uint64 state of each world's wind stream (splitmix64)."""
+    """(N*K,) uint64 state of each UAV's wind stream (splitmix64)."""
     blocked: np.ndarray
     """(N, X, Y, Z) cells inside an obstacle."""
     coverable: np.ndarray
@@ -101,7 +104,7 @@ class WorldArrays(NamedTuple):
     redmask: np.ndarray
     """(N, X, Y) cells seen by a redundant step (C_redundant of the RVC metric)."""
     visits: np.ndarray
-    """(N, X, Y, Z) visits of each cell this episode."""
+    """(N*K, X, Y, Z) each UAV's visits of each cell this episode."""
     blk_todo: np.ndarray
     """(N, G, G) coverable cells of each coarse block not yet covered."""
     blk_total: np.ndarray
@@ -115,22 +118,33 @@ class WorldArrays(NamedTuple):
     """(N,) coverable cells of the world's site, seeable or not (= the coverable count of a
     sphere world)."""
     progress: np.ndarray
-    """(N,) the step at which the world's coverage last grew (0 at reset): the observation's
-    stall scalar is ``steps - progress``."""
+    """(N*K,) the UAV's step at which its view last added coverage (0 at reset): the
+    observation's stall scalar is ``steps - progress``."""
     guarded: np.ndarray
-    """(N,) steps of this episode whose action the stall guard chose (``env.stall_guard``)."""
+    """(N*K,) steps of this episode whose action the stall guard chose (``env.stall_guard``)."""
+    left: np.ndarray
+    """(N*K,) whether the UAV has left the episode (a fleet's: its battery spent, or the
+    fleet's coverage complete) while teammates fly on."""
+    credit: np.ndarray
+    """(N*K,) ground cells credited to the UAV: first seen by it (the start's view included)."""
+    seen_now: np.ndarray
+    """(N*K,) ground cells in the UAV's footprint now (its last view)."""
+    yields: np.ndarray
+    """(N*K,) moves that held because a teammate took the cell earlier in the same step."""
+    clock: np.ndarray
+    """(N,) steps of the world's episode (whose UAV moves first: ``clock mod K``)."""
     terms: np.ndarray
-    """(N, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
+    """(N*K, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
-    """(N,) records of :data:`FLAGS_DTYPE`: the last step's events."""
+    """(N*K,) records of :data:`FLAGS_DTYPE`: the last step's events."""
     block_x: np.ndarray
     """(X,) coarse block of each x (a lookup, the same for every world)."""
     block_y: np.ndarray
     """(Y,) coarse block of each y."""
     buf: np.ndarray
-    """(N, rows, 2) scratch rows for each world's footprint."""
+    """(N*K, rows, 2) scratch rows for each UAV's footprint."""
     path: np.ndarray
-    """(N, 2, X*Y) scratch of the observation's path search: its queue, and each cell's
+    """(N*K, 2, X*Y) scratch of the observation's path search: its queue, and each cell's
     moves * 4 + first move (-1 not reached)."""
 
 
@@ -193,6 +207,18 @@ class Scenario:
     work: tuple[int, int, int, int] | None = None
     """Cells (x0, y0, x1, y1), inclusive, of the only ground left to cover at the start if
     drawn (``start_surveyed``); every other ground cell starts covered. None: all of it."""
+    fleet: tuple[tuple[int, int, int], ...] = ()
+    """A fleet's teammates (UAVs 2..K): their start cells, distinct and free."""
+    fleet_winds: tuple[int, ...] = ()
+    """A fleet's teammates: the seeds of their wind streams."""
+
+    def starts(self) -> tuple[tuple[int, int, int], ...]:
+        """Every UAV's start cell, UAV 1's first."""
+        return (tuple(int(v) for v in self.start), *self.fleet)  # type: ignore[return-value]
+
+    def winds(self) -> tuple[int, ...]:
+        """Every UAV's wind seed, UAV 1's first."""
+        return (int(self.wind_seed), *self.fleet_winds)
 
 
 @numba.njit(cache=True)
@@ -215,13 +241,59 @@ def blocked_grid(size: tuple[int, int, int], obstacles: np.ndarray) -> np.ndarra
     return blocked
 
 
+def fleet_starts(blocked: np.ndarray, start: tuple[int, int, int], uavs: int) -> list:
+    """The start cells of a fleet's teammates: the ``uavs - 1`` free cells nearest to UAV 1's
+    ``start`` by moves (breadth-first over free cells, in the order of the move table), as a
+    fleet takes off from one launch site. One line when fewer free cells can be reached."""
+    need = uavs - 1
+    found: list[tuple[int, int, int]] = []
+    seen = {start}
+    queue = [start]
+    head = 0
+    size = blocked.shape
+    while head < len(queue) and len(found) < need:
+        x, y, z = queue[head]
+        head += 1
+        for dx, dy, dz in D.MOVE_DELTAS:
+            c = (x + dx, y + dy, z + dz)
+            if c in seen or not all(0 <= v < n for v, n in zip(c, size, strict=True)):
+                continue
+            seen.add(c)
+            if not blocked[c]:
+                queue.append(c)
+                found.append(c)
+                if len(found) == need:
+                    break
+    if len(found) < need:
+        raise ConfigError(
+            f"env.uavs={uavs}: only {len(found) + 1} free cells can be reached from the start "
+            f"{start}; use fewer UAVs"
+        )
+    return found
+
+
 def draw_scenario(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
     """Draw obstacles, a free start cell and the wind seed from ``rng``.
 
     Obstacle layouts that leave no free cell or no coverable ground are drawn again. On a site
     (``cfg.site``) the map is the site's and only the start (from its start cells), the wind
-    and the camera are drawn.
+    and the camera are drawn. A fleet's teammates (``cfg.uavs`` > 1) start at the free cells
+    nearest to the start (:func:`fleet_starts`), each with a wind seed drawn after everything
+    else, so a fleet's scenario holds the one-UAV scenario of the same seed.
     """
+    scenario = _draw_one(cfg, rng)
+    if cfg.uavs == 1:
+        return scenario
+    if scenario.grids is not None:
+        blocked = scenario.grids.blocked
+    else:
+        blocked = blocked_grid(cfg.size, scenario.obstacles)
+    fleet = fleet_starts(blocked, scenario.starts()[0], cfg.uavs)
+    winds = tuple(int(rng.integers(0, 2**63 - 1)) for _ in fleet)
+    return dataclasses.replace(scenario, fleet=tuple(fleet), fleet_winds=winds)
+
+
+def _draw_one(cfg: VCPPConfig, rng: np.random.Generator) -> Scenario:
     if cfg.site:
         from pirl.world.seeable import site_grids
 
@@ -282,35 +354,43 @@ def _draw_camera(cfg: VCPPConfig, rng: np.random.Generator) -> tuple[int, int, i
 
 
 @numba.njit(cache=True)
-def _reset_bookkeeping(w, p, e, work):
-    """Zero world e's bookkeeping, count its coverable cells and take the first view. With
-    ``work`` = (x0, y0, x1, y1) (x0 >= 0) the ground outside that box starts covered."""
-    w.views[e] = 0
-    w.redmask[e] = False
-    w.visits[e] = 0
-    w.blk_todo[e] = 0
-    w.blk_total[e] = 0
-    w.progress[e] = 0
-    w.guarded[e] = 0
+def _reset_bookkeeping(w, p, g, work):
+    """Zero world g's bookkeeping and its UAVs', count its coverable cells and take each UAV's
+    first view (UAV 1's first). With ``work`` = (x0, y0, x1, y1) (x0 >= 0) the ground outside
+    that box starts covered."""
+    w.views[g] = 0
+    w.redmask[g] = False
+    w.blk_todo[g] = 0
+    w.blk_total[g] = 0
+    w.clock[g] = 0
     n = 0
     covered = 0
     x0, y0, x1, y1 = work
     for i in range(w.coverable.shape[1]):
         for j in range(w.coverable.shape[2]):
-            if w.coverable[e, i, j]:
+            if w.coverable[g, i, j]:
                 n += 1
-                w.blk_total[e, w.block_x[i], w.block_y[j]] += 1
+                w.blk_total[g, w.block_x[i], w.block_y[j]] += 1
                 if x0 >= 0 and not (x0 <= i <= x1 and y0 <= j <= y1):
-                    w.views[e, i, j] = 1
+                    w.views[g, i, j] = 1
                     covered += 1
                 else:
-                    w.blk_todo[e, w.block_x[i], w.block_y[j]] += 1
-    st = w.status[e]
-    st["coverable"] = n
-    st["covered"] = covered
-    w.visits[e, st["x"], st["y"], st["z"]] = 1
-    # The camera sees before the first action; that first view earns no reward.
-    D.observe(w, p, e, False)
+                    w.blk_todo[g, w.block_x[i], w.block_y[j]] += 1
+    k = D.fleet_size(w)
+    for e in range(g * k, g * k + k):
+        w.visits[e] = 0
+        w.progress[e] = 0
+        w.guarded[e] = 0
+        w.left[e] = False
+        w.credit[e] = 0
+        w.yields[e] = 0
+        st = w.status[e]
+        st["coverable"] = n
+        st["covered"] = covered
+        w.visits[e, st["x"], st["y"], st["z"]] = 1
+    # The cameras see before the first action; these first views earn no reward.
+    for e in range(g * k, g * k + k):
+        D.observe(w, p, e, False)
 
 
 class WorldBatch:
@@ -330,6 +410,8 @@ class WorldBatch:
         check_memory(cfg, num)
         self.cfg = cfg
         self.num = num
+        self.uavs = k = int(cfg.uavs)
+        self.slots = slots = num * k
         sx, sy, sz = cfg.size
         g = cfg.obs_global
         self.model = footprint_model(cfg.footprint)
@@ -340,27 +422,32 @@ class WorldBatch:
         self.parallel = bool(parallel) and num > 1
         self.lens = lens_of(self.model, cfg.size, cfg.fov_deg, cfg.max_range, cfg.occlusion)
         self.arrays = WorldArrays(
-            status=np.zeros(num, dtype=STATUS_DTYPE),
-            energy=np.zeros(num, dtype=np.float64),
-            rng=np.zeros(num, dtype=np.uint64),
+            status=np.zeros(slots, dtype=STATUS_DTYPE),
+            energy=np.zeros(slots, dtype=np.float64),
+            rng=np.zeros(slots, dtype=np.uint64),
             blocked=np.zeros((num, sx, sy, sz), dtype=np.bool_),
             coverable=np.zeros((num, sx, sy), dtype=np.bool_),
             views=np.zeros((num, sx, sy), dtype=np.int32),
             redmask=np.zeros((num, sx, sy), dtype=np.bool_),
-            visits=np.zeros((num, sx, sy, sz), dtype=np.int32),
+            visits=np.zeros((slots, sx, sy, sz), dtype=np.int32),
             blk_todo=np.zeros((num, g, g), dtype=np.int32),
             blk_total=np.zeros((num, g, g), dtype=np.int32),
             obstacles=np.zeros((num, self.max_obstacles, 4), dtype=np.float64),
             occluding=np.zeros((num, sx, sy, sz), dtype=np.bool_),
             coverable_all=np.zeros(num, dtype=np.int64),
-            progress=np.zeros(num, dtype=np.int64),
-            guarded=np.zeros(num, dtype=np.int64),
-            terms=np.zeros((num, D.N_TERMS), dtype=np.float64),
-            flags=np.zeros(num, dtype=FLAGS_DTYPE),
+            progress=np.zeros(slots, dtype=np.int64),
+            guarded=np.zeros(slots, dtype=np.int64),
+            left=np.zeros(slots, dtype=np.bool_),
+            credit=np.zeros(slots, dtype=np.int64),
+            seen_now=np.zeros(slots, dtype=np.int64),
+            yields=np.zeros(slots, dtype=np.int64),
+            clock=np.zeros(num, dtype=np.int64),
+            terms=np.zeros((slots, D.N_TERMS), dtype=np.float64),
+            flags=np.zeros(slots, dtype=FLAGS_DTYPE),
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
             block_y=(np.arange(sy) * g // sy).astype(np.int64),
-            buf=np.zeros((num, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64),
-            path=np.zeros((num, 2, sx * sy), dtype=np.int32),
+            buf=np.zeros((slots, buffer_rows(self.model, cfg.max_range), 2), dtype=np.int64),
+            path=np.zeros((slots, 2, sx * sy), dtype=np.int32),
         )
         self.arrays.path[:, 1] = -1  # the path search's "not reached" (it keeps it so)
         self.params = Params(
@@ -387,7 +474,9 @@ class WorldBatch:
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
-        missing = set(STATE_ARRAYS) - set(state) - {"progress", "guarded"}
+        # Arrays added after a checkpoint's version start at their reset values.
+        later = {"progress", "guarded", "left", "credit", "seen_now", "yields", "clock"}
+        missing = set(STATE_ARRAYS) - set(state) - later
         if missing:
             raise ValueError(f"world state lacks {sorted(missing)}")
         for name in STATE_ARRAYS:
@@ -408,7 +497,7 @@ class WorldBatch:
         return scenario
 
     def load_scenario(self, e: int, scenario: Scenario) -> None:
-        """Start a new episode in world ``e`` on a given scenario."""
+        """Start a new episode in world ``e`` (every UAV of it) on a given scenario."""
         cfg = self.cfg
         n = len(scenario.obstacles)
         if n > self.max_obstacles:
@@ -427,6 +516,16 @@ class WorldBatch:
             raise ConfigError(f"scenario start {scenario.start} lies outside the grid {cfg.size}")
         if blocked[start]:
             raise ConfigError(f"scenario start {start} lies inside an obstacle")
+        starts = scenario.starts()
+        if len(starts) != self.uavs:
+            raise ConfigError(
+                f"scenario has {len(starts)} UAV start(s); this world flies {self.uavs}"
+            )
+        for cell in starts[1:]:
+            if not all(0 <= v < n for v, n in zip(cell, cfg.size, strict=True)) or blocked[cell]:
+                raise ConfigError(f"scenario start {cell} lies outside the grid or in an obstacle")
+        if len(set(starts)) != len(starts):
+            raise ConfigError(f"scenario starts {starts}: two UAVs in one cell")
         w = self.arrays
         w.obstacles[e] = 0.0
         w.obstacles[e, :n] = scenario.obstacles
@@ -439,20 +538,27 @@ class WorldBatch:
             w.occluding[e] = blocked
             w.coverable[e] = ~w.blocked[e, :, :, 0]
             w.coverable_all[e] = int(w.coverable[e].sum())
-        w.status[e] = 0
-        st = w.status[e : e + 1]  # a view: numpy writes a record's fields through it
-        st["x"], st["y"], st["z"] = start
         camera = scenario.camera or (cfg.start_tilt, cfg.start_pan, cfg.start_zoom10)
-        st["tilt"], st["pan"], st["zoom10"] = camera
-        st["n_obstacles"] = n
-        w.energy[e] = self.capacity
-        w.rng[e] = np.uint64(scenario.wind_seed)
+        first = e * self.uavs
+        for u, (cell, wind) in enumerate(zip(starts, scenario.winds(), strict=True)):
+            s = first + u
+            w.status[s] = 0
+            st = w.status[s : s + 1]  # a view: numpy writes a record's fields through it
+            st["x"], st["y"], st["z"] = cell
+            st["tilt"], st["pan"], st["zoom10"] = camera
+            st["n_obstacles"] = n
+            w.energy[s] = self.capacity
+            w.rng[s] = np.uint64(wind)
         work = scenario.work if scenario.work is not None else (-1, -1, -1, -1)
         _reset_bookkeeping(w, self.params, e, tuple(int(v) for v in work))
-        w.terms[e] = 0.0
-        w.flags[e] = 0
+        w.terms[first : first + self.uavs] = 0.0
+        w.flags[first : first + self.uavs] = 0
 
-    # -- queries --------------------------------------------------------------------------
+    # -- queries: ``e`` is a slot (with one UAV per world, the world) ---------------------
+    def world_of(self, e: int) -> int:
+        """The world of slot ``e`` (the row of the map and coverage arrays)."""
+        return e // self.uavs
+
     def footprint(
         self,
         e: int,
@@ -467,12 +573,13 @@ class WorldBatch:
         tilt, pan, zoom10 = camera if camera is not None else self.camera_setting(e)
         buf = np.empty_like(self.buf[e])
         at = CameraPose(int(x), int(y), int(z), int(tilt), int(pan), int(zoom10))
-        n = footprint_cells(self.lens, at, self.obstacle_list(e), self.occluding[e], buf)
+        g = self.world_of(e)
+        n = footprint_cells(self.lens, at, self.obstacle_list(e), self.occluding[g], buf)
         return buf[:n].copy()
 
     def covered(self, e: int) -> np.ndarray:
-        """Boolean (X, Y) map of covered cells of world ``e``."""
-        return self.views[e] > 0
+        """Boolean (X, Y) map of covered cells of slot ``e``'s world (the fleet's coverage)."""
+        return self.views[self.world_of(e)] > 0
 
     def position(self, e: int) -> tuple[int, int, int]:
         """Cell (x, y, z) of world ``e``."""
@@ -500,7 +607,7 @@ class WorldBatch:
 
     def obstacle_list(self, e: int) -> np.ndarray:
         """Obstacle spheres (n, 4) of world ``e``: rows (cx, cy, cz, radius)."""
-        return self.obstacles[e, : int(self.status[e]["n_obstacles"])].copy()
+        return self.obstacles[self.world_of(e), : int(self.status[e]["n_obstacles"])].copy()
 
 
 __all__ = [
@@ -515,4 +622,5 @@ __all__ = [
     "blocked_grid",
     "copy_records",
     "draw_scenario",
+    "fleet_starts",
 ]
