@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
+from pirl.config.errors import ConfigError
 from pirl.config.world import REWARD_TERMS, VCPPConfig
 from pirl.env.info import InfoSnapshot, LazyInfo
 from pirl.env.observation import build_observations, obs_layout, obs_size_for, observation
@@ -128,6 +129,15 @@ def _make_fleet_kernel(parallel: bool):
 
 _fleet_serial = _make_fleet_kernel(False)
 _fleet_parallel = _make_fleet_kernel(True)
+
+
+def require_one_uav(cfg: VCPPConfig, api: str) -> None:
+    """Refuse a fleet (``env.uavs`` > 1) in an environment API that flies one UAV."""
+    if cfg.uavs != 1:
+        raise ConfigError(
+            f"env.uavs={cfg.uavs}: {api} flies one UAV; a fleet flies in "
+            "pirl.env.fleet (FleetParallelEnv for PettingZoo, FleetVecEnv for Stable-Baselines3)"
+        )
 
 
 class EnvCore:

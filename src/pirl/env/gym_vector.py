@@ -19,7 +19,7 @@ from gymnasium.vector.utils import batch_space
 
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
-from pirl.env.core import EnvCore
+from pirl.env.core import EnvCore, require_one_uav
 from pirl.env.info import InfoSnapshot, LazyVectorInfo
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
@@ -73,6 +73,7 @@ class VCPPVectorEnv(ShapingHooks, VectorEnv):
             raise ConfigError(f"render_mode={render_mode!r}: allowed values are None, 'rgb_array'")
         self.render_mode = render_mode
         self.num_envs = num_envs
+        require_one_uav(self.cfg, "VCPPVectorEnv")
         self.core = EnvCore(self.cfg, num_envs, parallel)
         self.copy = copy
         n = obs_size_for(self.cfg)

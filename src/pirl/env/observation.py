@@ -101,9 +101,7 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
         | (EXTRA_PATH if cfg.obs_target_path else 0)
         | (EXTRA_STALL if cfg.obs_stall else 0)
     )
-    return ObsLayout(
-        int(cfg.obs_window), extras, int(cfg.obs_visits_cap), int(cfg.obs_teammates)
-    )
+    return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap), int(cfg.obs_teammates))
 
 
 @numba.njit(cache=True, inline="always")

@@ -12,7 +12,7 @@ from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from pirl.config.world import VCPPConfig
-from pirl.env.core import EnvCore
+from pirl.env.core import EnvCore, require_one_uav
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
@@ -41,6 +41,7 @@ class VCPPVecEnv(ShapingHooks, VecEnv):
         **settings: Any,
     ) -> None:
         self.cfg = VCPPConfig.resolve(config, settings)
+        require_one_uav(self.cfg, "VCPPVecEnv")
         self.core = EnvCore(self.cfg, num_envs, parallel)
         n = obs_size_for(self.cfg)
         self.render_mode = "rgb_array"

@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
-from pirl.env.core import EnvCore
+from pirl.env.core import EnvCore, require_one_uav
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.world import dynamics as D
@@ -101,6 +101,7 @@ class VCPPEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode={render_mode!r}: allowed values are None, 'rgb_array'")
         self.render_mode = render_mode
+        require_one_uav(self.cfg, "pirl/VCPP-v0 (VCPPEnv)")
         self.core = EnvCore(self.cfg, 1)
         self.action_space = spaces.Discrete(D.N_ACTIONS)
         n = obs_size_for(self.cfg)

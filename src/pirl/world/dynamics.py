@@ -154,6 +154,12 @@ def book_view(w, e, cells, mark_redundant):
     for t in range(g * k, g * k + k):
         w.status[t]["covered"] += new
     w.credit[e] += new
+    if k > 1:
+        bit = 1 << (e - g * k)
+        for r in range(cells.shape[0]):
+            i, j = cells[r, 0], cells[r, 1]
+            if coverable[g, i, j]:
+                w.seen_by[g, i, j] |= bit
     st["cell_views"] += seen
     if new == 0 and mark_redundant:
         for k in range(cells.shape[0]):
@@ -456,6 +462,16 @@ def step_fleet(w, p, g, actions):
             parked |= 1 << u
         else:
             step_one(w, p, e, actions[e])
+    for a in range(first, first + k):
+        if w.left[a]:
+            continue
+        sa = w.status[a]
+        for b in range(a + 1, first + k):
+            if not w.left[b]:
+                sb = w.status[b]
+                d = abs(sa["x"] - sb["x"]) + abs(sa["y"] - sb["y"]) + abs(sa["z"] - sb["z"])
+                if d == 1:
+                    w.near[g] += 1
     complete = w.status[first]["covered"] >= w.status[first]["coverable"]
     flying = 0
     for u in range(k):

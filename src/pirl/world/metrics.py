@@ -82,7 +82,7 @@ def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
     steps = r["steps"]
     battery_left = batch.battery(e)
     vcr = covered / coverable if coverable else 0.0
-    everything = int(batch.coverable_all[e])
+    everything = int(batch.coverable_all[batch.world_of(e)])
     return {
         "vcr": vcr,
         # On a site: the share of all its coverable cells, seeable or not (= vcr elsewhere).
@@ -107,3 +107,40 @@ def episode_metrics(batch: WorldBatch, e: int) -> dict[str, float]:
         "guarded_steps": int(batch.guarded[e]),
         "guarded_share": int(batch.guarded[e]) / steps if steps else 0.0,
     }
+
+
+def fleet_metrics(batch: WorldBatch, g: int) -> dict[str, float]:
+    """Metrics of world ``g``'s fleet so far: coverage (VCR), UAVs, the episode's steps (the
+    fleet's clock), energy used by all UAVs (battery units, 1 = one full battery), overlap
+    (ground cells seen by more than one UAV, over cells seen), near misses (pairs of UAVs in
+    face-adjacent cells, summed over steps), yields and each UAV's credited cells."""
+    k = batch.uavs
+    rows = slice(g * k, g * k + k)
+    st = batch.status[rows]
+    covered, coverable = int(st["covered"][0]), int(st["coverable"][0])
+    seen_by = batch.seen_by[g]
+    seen = int((seen_by != 0).sum()) if k > 1 else covered
+    shared = int((_bit_count(seen_by) >= 2).sum()) if k > 1 else 0
+    return {
+        "uavs": k,
+        "vcr": covered / coverable if coverable else 0.0,
+        "covered": covered,
+        "coverable": coverable,
+        "fleet_steps": int(batch.clock[g]) if k > 1 else int(st["steps"][0]),
+        "energy_used": float((batch.capacity - batch.energy[rows]).clip(0).sum() / batch.capacity),
+        "uav_overlap": shared / seen if seen else 0.0,
+        "near_misses": int(batch.near[g]),
+        "yields": int(batch.yields[rows].sum()),
+        "collisions": int(st["collisions"].sum()),
+        "credit": [int(c) for c in batch.credit[rows]],
+    }
+
+
+def _bit_count(a: np.ndarray) -> np.ndarray:
+    """Set bits of each int64 (the UAVs that saw a cell)."""
+    count = np.zeros(a.shape, dtype=np.int64)
+    v = a.copy()
+    while v.any():
+        count += v & 1
+        v >>= 1
+    return count

@@ -50,15 +50,17 @@ class WorldView:
 
     @classmethod
     def of(cls, world: WorldBatch, e: int, copy: bool = False) -> WorldView:
-        """World ``e``'s view: live arrays (``copy=False``) or a frozen snapshot."""
+        """Slot ``e``'s view (its world's map, its UAV's pose): live arrays (``copy=False``)
+        or a frozen snapshot."""
         take = (lambda a: a.copy()) if copy else (lambda a: a)
+        g = world.world_of(e)
         return cls(
             cfg=world.cfg,
-            blocked=take(world.blocked[e]),
-            coverable=take(world.coverable[e]),
-            views=take(world.views[e]),
+            blocked=take(world.blocked[g]),
+            coverable=take(world.coverable[g]),
+            views=take(world.views[g]),
             obstacles=world.obstacle_list(e),
-            occluding=take(world.occluding[e]),
+            occluding=take(world.occluding[g]),
             position=world.position(e),
             camera=world.camera_setting(e),
             energy=float(world.energy[e]),

@@ -66,7 +66,7 @@ FLAGS_DTYPE = np.dtype(
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
     "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all", "progress",
-    "guarded", "left", "credit", "seen_now", "yields", "clock",
+    "guarded", "left", "credit", "seen_now", "yields", "clock", "seen_by", "near",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -133,6 +133,11 @@ class WorldArrays(NamedTuple):
     """(N*K,) moves that held because a teammate took the cell earlier in the same step."""
     clock: np.ndarray
     """(N,) steps of the world's episode (whose UAV moves first: ``clock mod K``)."""
+    seen_by: np.ndarray
+    """(N, X, Y) a fleet's: bit u set when UAV u has seen the ground cell (overlap between
+    UAVs); untouched with one UAV."""
+    near: np.ndarray
+    """(N,) a fleet's near misses: pairs of UAVs in face-adjacent cells, summed over steps."""
     terms: np.ndarray
     """(N*K, 8) raw reward terms of the last step, in the order of ``REWARD_TERMS``."""
     flags: np.ndarray
@@ -363,6 +368,8 @@ def _reset_bookkeeping(w, p, g, work):
     w.blk_todo[g] = 0
     w.blk_total[g] = 0
     w.clock[g] = 0
+    w.near[g] = 0
+    w.seen_by[g] = 0
     n = 0
     covered = 0
     x0, y0, x1, y1 = work
@@ -442,6 +449,8 @@ class WorldBatch:
             seen_now=np.zeros(slots, dtype=np.int64),
             yields=np.zeros(slots, dtype=np.int64),
             clock=np.zeros(num, dtype=np.int64),
+            seen_by=np.zeros((num, sx, sy) if k > 1 else (num, 1, 1), dtype=np.int64),
+            near=np.zeros(num, dtype=np.int64),
             terms=np.zeros((slots, D.N_TERMS), dtype=np.float64),
             flags=np.zeros(slots, dtype=FLAGS_DTYPE),
             block_x=(np.arange(sx) * g // sx).astype(np.int64),
@@ -476,6 +485,7 @@ class WorldBatch:
         """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
         # Arrays added after a checkpoint's version start at their reset values.
         later = {"progress", "guarded", "left", "credit", "seen_now", "yields", "clock"}
+        later |= {"seen_by", "near"}
         missing = set(STATE_ARRAYS) - set(state) - later
         if missing:
             raise ValueError(f"world state lacks {sorted(missing)}")

@@ -1,0 +1,159 @@
+"""A fleet of UAVs in one world: the rules (turns, cells, credit, leaving), the observation's
+teammates block, and the two APIs (PettingZoo's ParallelEnv, the SB3 VecEnv of slots)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test
+
+from pirl.config.errors import ConfigError
+from pirl.env.fleet import FleetParallelEnv, make_fleet_vec_env
+from pirl.env.observation import N_TEAMMATE, obs_size_for
+from pirl.env.sb3_vec import make_vec_env
+from pirl.env.vcpp_env import VCPPEnv
+from pirl.world import dynamics as D
+from pirl.world.metrics import fleet_metrics
+
+
+def _masked_actions(masks: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return np.array([rng.choice(np.flatnonzero(m)) for m in masks], dtype=np.int64)
+
+
+def test_parallel_api_test_passes():
+    parallel_api_test(FleetParallelEnv(uavs=3, size=(15, 15, 3)), num_cycles=400)
+
+
+def test_one_uav_fleet_is_the_single_env_step_for_step():
+    single = VCPPEnv(size=(15, 15, 3), obs_target=True, reward="ewri")
+    fleet = FleetParallelEnv(uavs=1, size=(15, 15, 3), obs_target=True, reward="ewri")
+    for seed in range(6):
+        obs, _ = single.reset(seed=seed)
+        fobs, _ = fleet.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        np.testing.assert_array_equal(obs, fobs["uav_0"])
+        while fleet.agents:
+            a = int(rng.integers(D.N_ACTIONS))
+            obs, r, term, trunc, _ = single.step(a)
+            fobs, fr, fterm, ftrunc, _ = fleet.step({"uav_0": a})
+            np.testing.assert_array_equal(obs, fobs["uav_0"])
+            assert (r, term, trunc) == (fr["uav_0"], fterm["uav_0"], ftrunc["uav_0"])
+        assert term or trunc
+
+
+def test_pettingzoo_and_vecenv_agree_step_for_step():
+    settings = {"uavs": 3, "size": (18, 18, 3), "obs_teammates": 2, "reward": "ewri"}
+    pz = FleetParallelEnv(**settings)
+    for seed in (11, 12, 13):
+        vec = make_fleet_vec_env(1, seed=seed, **settings)
+        vobs = vec.reset()
+        obs, infos = pz.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        while pz.agents:
+            for u, a in enumerate(pz.possible_agents):
+                if a in pz.agents:
+                    np.testing.assert_array_equal(obs[a], vobs[u])
+                    np.testing.assert_array_equal(infos[a]["action_mask"], vec.action_masks()[u])
+            actions = _masked_actions(vec.action_masks(), rng)
+            live = [a for a in pz.possible_agents if a in pz.agents]
+            vobs, vr, vdone, vinfos = vec.step(actions)
+            obs, r, term, trunc, infos = pz.step(
+                {a: int(actions[pz.possible_agents.index(a)]) for a in live}
+            )
+            for a in live:
+                u = pz.possible_agents.index(a)
+                assert r[a] == float(np.float32(vr[u])) or r[a] == pytest.approx(float(vr[u]))
+                assert (term[a] or trunc[a]) == bool(vdone[u])
+                if term[a] or trunc[a]:
+                    np.testing.assert_array_equal(obs[a], vinfos[u]["terminal_observation"])
+
+
+def test_two_uavs_never_share_a_cell_and_credit_adds_up():
+    env = FleetParallelEnv(uavs=4, size=(12, 12, 3), wind_prob=0.3)
+    rng = np.random.default_rng(1)
+    for seed in range(5):
+        obs, infos = env.reset(seed=seed)
+        w = env.world
+        start_covered = int(w.status[0]["covered"])
+        assert int(w.credit.sum()) == start_covered
+        while env.agents:
+            flying = [u for u in range(4) if not w.left[u]]
+            cells = {w.position(u) for u in flying}
+            assert len(cells) == len(flying)
+            for u in flying:  # the mask never offers a teammate's cell
+                x, y, z = w.position(u)
+                mask = infos[env.possible_agents[u]]["action_mask"]
+                for a in range(D.N_MOVES):
+                    dx, dy, dz = D.MOVE_DELTAS[a]
+                    if (x + dx, y + dy, z + dz) in cells:
+                        assert not mask[a]
+            actions = {
+                a: int(rng.choice(np.flatnonzero(infos[a]["action_mask"]))) for a in env.agents
+            }
+            obs, r, term, trunc, infos = env.step(actions)
+        covered = int(w.status[0]["covered"])
+        assert (w.status["covered"] == covered).all()  # the fleet's coverage, in every slot
+        assert int(w.credit.sum()) == covered
+        m = fleet_metrics(w, 0)
+        assert m["uavs"] == 4 and sum(m["credit"]) == covered
+        assert 0.0 <= m["uav_overlap"] <= 1.0
+
+
+def test_complete_coverage_ends_every_uav_and_a_spent_uav_parks():
+    env = make_fleet_vec_env(1, seed=2, uavs=2, size=(6, 6, 3), battery_capacity=400.0)
+    env.reset()
+    rng = np.random.default_rng(3)
+    for _ in range(2000):
+        actions = _masked_actions(env.action_masks(), rng)
+        before = env.core.world.status["covered"][0]
+        obs, r, done, infos = env.step(actions)
+        if done.all():
+            assert "terminal_observation" in infos[0] and "terminal_observation" in infos[1]
+            break
+    else:
+        pytest.fail("the fleet never finished a small world")
+    assert before >= 0
+    # A parked slot: one action, reward 0, done at every step until its world ends.
+    env = make_fleet_vec_env(1, seed=0, uavs=2, size=(15, 15, 3), energy_hover=0.0)
+    env.reset()
+    w = env.world
+    w.energy[0] = 0.05  # UAV 1 spends its battery on its next move
+    obs, r, done, infos = env.step(np.array([D.X_PLUS, D.TILT_MINUS]))
+    obs, r, done, infos = env.step(np.array([D.X_PLUS, D.TILT_PLUS]))
+    assert w.left[0] and not w.left[1]
+    assert env.action_masks()[0].sum() == 1 and env.action_masks()[0][D.PARKED]
+    position = w.position(0)
+    obs, r, done, infos = env.step(np.array([D.PARKED, D.TILT_MINUS]))
+    assert r[0] == 0.0 and done[0] and not done[1]
+    assert infos[0]["fleet_active"] is False
+    assert w.position(0) == position
+
+
+def test_teammates_block_is_the_same_size_for_any_fleet():
+    sizes = {k: obs_size_for(FleetParallelEnv(uavs=k, obs_teammates=3).cfg) for k in (1, 2, 5)}
+    assert len(set(sizes.values())) == 1
+    env = FleetParallelEnv(uavs=2, size=(15, 15, 3), obs_teammates=3)
+    obs, _ = env.reset(seed=4)
+    block = obs["uav_0"][-3 * N_TEAMMATE :]
+    assert block[0] == 1.0 and block[N_TEAMMATE:].sum() == 0.0  # one teammate, then zeros
+    (x0, y0, _), (x1, y1, _) = env.world.position(0), env.world.position(1)
+    assert block[1] == pytest.approx(((x1 - x0) / 14 + 1) / 2)
+    assert block[2] == pytest.approx(((y1 - y0) / 14 + 1) / 2)
+    single = VCPPEnv(size=(15, 15, 3), obs_teammates=3)
+    obs1, _ = single.reset(seed=4)
+    assert obs1[-3 * N_TEAMMATE :].sum() == 0.0
+
+
+def test_bad_fleets_are_one_line():
+    with pytest.raises(ConfigError, match=r"env.uavs=0"):
+        FleetParallelEnv(uavs=0)
+    with pytest.raises(ConfigError, match=r"env.uavs=2: .*flies one UAV"):
+        VCPPEnv(uavs=2)
+    with pytest.raises(ConfigError, match=r"flies one UAV"):
+        make_vec_env(2, uavs=3)
+    # Three free cells, five UAVs: refused at reset, in one line.
+    env = FleetParallelEnv(uavs=5, size=(3, 3, 3), obstacles_min=0, obstacles_max=0)
+    env.reset(seed=0)  # 27 free cells: fine
+    crowded = FleetParallelEnv(uavs=40, size=(3, 3, 3), obstacles_min=0, obstacles_max=0)
+    with pytest.raises(ConfigError, match=r"free cells can be reached"):
+        crowded.reset(seed=0)
