@@ -157,3 +157,34 @@ def test_bad_fleets_are_one_line():
     crowded = FleetParallelEnv(uavs=40, size=(3, 3, 3), obstacles_min=0, obstacles_max=0)
     with pytest.raises(ConfigError, match=r"free cells can be reached"):
         crowded.reset(seed=0)
+
+
+def test_area_split_is_balanced_connected_and_respects_walls():
+    from pirl.world.split import geodesic, split_area, split_balance
+
+    passable = np.ones((30, 20), dtype=bool)
+    passable[15, 0:17] = False  # a wall with a gap at the top
+    ground = np.ones((30, 20), dtype=bool)
+    starts = [(2, 2), (3, 2), (2, 3), (3, 3)]
+    owner = split_area(passable, ground, starts)
+    assert split_balance(owner, 4) <= 1.1
+    assert (owner[passable] >= 0).all()
+    for u in range(4):  # every part is one piece: one cell of it reaches all, inside it
+        part = (owner == u) & passable
+        first = tuple(int(v) for v in np.argwhere(part)[0])
+        dist = geodesic(part, first)
+        assert (dist[part] < np.iinfo(np.int64).max // 4).all()
+
+
+def test_planner_fleet_covers_a_world_and_is_faster_than_one_uav():
+    from pirl.config.world import VCPPConfig
+    from pirl.evaluate.fleet import run_fleet_episode, speed_ups
+
+    cfg = VCPPConfig(size=(30, 30, 3))
+    rows = {k: [run_fleet_episode(cfg.replace(uavs=k), s).row for s in (0, 1)] for k in (1, 2, 4)}
+    for k, episodes in rows.items():
+        for row in episodes:
+            assert row["vcr"] >= 0.99 and row["uavs"] == k and row["makespan_99"] is not None
+            assert sum(row["credit"]) == row["covered"]
+    ups = speed_ups(rows)
+    assert ups[1] == 1.0 and ups[4] < ups[2] < 1.0

@@ -10,10 +10,16 @@ Not learned and not an LLM. With the obstacle map known, it
 moving along shortest free paths (replanned when wind pushes it off), so it goes around
 obstacles. It never plans a leg it cannot pay for: a target whose path costs more energy than
 is left is dropped.
+
+A fleet (``env.uavs`` > 1) runs one planner per UAV, each given its part of the area split
+(:func:`pirl.world.split.split_area`: balanced connected parts grown from the UAVs' starts):
+it sweeps its own part, then helps with whatever is left anywhere; a teammate in the way is an
+obstacle for that step's path (:func:`fleet_planners`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -28,6 +34,7 @@ from pirl.world.planning import (
     largest_footprint_camera,
     nearest,
 )
+from pirl.world.split import split_area
 from pirl.world.state import WorldBatch
 
 _MOVE_ACTION = {delta: action for action, delta in enumerate(MOVE_DELTAS)}
@@ -56,11 +63,14 @@ class BoustrophedonPolicy(Policy):
     name = "boustrophedon"
     label = "boustrophedon (planner, not learned)"
 
-    def __init__(self) -> None:
+    def __init__(self, part: np.ndarray | None = None) -> None:
         self.world: WorldBatch | None = None
+        self.part = part
+        """(X, Y) ground cells this UAV sweeps first (a fleet's); None: all of them."""
 
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         self.world, self.e = world, index
+        self.own = self.part
         view = WorldView.of(world, index)
         self.camera, self.altitude = largest_footprint_camera(view)
         self.waypoints = self._lanes(view)
@@ -88,7 +98,7 @@ class BoustrophedonPolicy(Policy):
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         if self.world is None:
             raise RuntimeError("call reset(world, index) before act()")
-        view = WorldView.of(self.world, self.e)
+        view = self._view()
         action = camera_action(view.camera, self.camera)
         if action is not None:
             return action
@@ -99,7 +109,9 @@ class BoustrophedonPolicy(Policy):
                 self.target, self.path = self._next_target(view, pos)
                 if self.target is None:
                     break
-            if not self.path or self.path[0] != pos:
+            # A teammate may stand on the way now (a fleet's): plan round it.
+            blocked_ahead = len(self.path) > 1 and not view.free(self.path[1])
+            if not self.path or self.path[0] != pos or blocked_ahead:
                 self.path = bfs_path(view, pos, self.target) or []
             if len(self.path) >= 2:
                 action = move_action(self.path[0], self.path[1])
@@ -108,6 +120,25 @@ class BoustrophedonPolicy(Policy):
             self.target = None
         # Nothing reachable is left to see: hold still.
         return hold_action(view.camera)
+
+    def _view(self) -> WorldView:
+        """The world as this UAV plans on it: a fleet's UAV sees only its own part's ground
+        while some of it is left, and its teammates' cells as blocked."""
+        view = WorldView.of(self.world, self.e)
+        if self.world.uavs == 1:
+            return view
+        if self.own is not None:
+            if (view.coverable & self.own & (view.views == 0)).any():
+                view = dataclasses.replace(view, coverable=view.coverable & self.own)
+            else:  # its part is done: help with what is left anywhere
+                self.own, self.target, self.sweeping = None, None, False
+        blocked = view.blocked.copy()
+        k = self.world.uavs
+        first = (self.e // k) * k
+        for t in range(first, first + k):
+            if t != self.e and not self.world.left[t]:
+                blocked[self.world.position(t)] = True
+        return dataclasses.replace(view, blocked=blocked)
 
     def _affordable(self, view: WorldView, path: list[Cell]) -> bool:
         legs = max(0, len(path) - 1)
@@ -128,3 +159,15 @@ class BoustrophedonPolicy(Policy):
         if path and self._affordable(view, path):
             return path[-1], path
         return None, []
+
+
+def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
+    """One planner per UAV of world ``g`` (reset each with its slot), each given its part of
+    the area split at the sweep altitude (:func:`pirl.world.split.split_area`)."""
+    k = world.uavs
+    view = WorldView.of(world, g * k)
+    _, altitude = largest_footprint_camera(view)
+    passable = ~view.blocked[:, :, altitude]
+    starts = [world.position(s)[:2] for s in range(g * k, g * k + k)]
+    owner = split_area(passable, view.coverable, starts)
+    return [BoustrophedonPolicy(owner == u) for u in range(k)]
