@@ -188,3 +188,19 @@ def test_planner_fleet_covers_a_world_and_is_faster_than_one_uav():
             assert sum(row["credit"]) == row["covered"]
     ups = speed_ups(rows)
     assert ups[1] == 1.0 and ups[4] < ups[2] < 1.0
+
+
+def test_report_has_a_fleets_table_and_figure_and_keeps_fleets_out_of_the_paper_tables(tmp_path):
+    from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_builtin
+    from pirl.report.document import write_report
+
+    plan = EvalPlan([spec_for_builtin("boustrophedon")], [(12, 12, 3)], 2, uavs=[1, 2])
+    summary = evaluate(plan, tmp_path / "eval")
+    write_report(tmp_path / "report", summary)
+    table = (tmp_path / "report" / "table.md").read_text()
+    fleets = table.split("### Fleets")[1].split("###")[0]
+    lines = [line for line in fleets.splitlines() if line.startswith("| 12x12x3")]
+    assert [line.split("|")[4].strip() for line in lines] == ["1", "2"]
+    assert (tmp_path / "report" / "fleet_coverage.png").stat().st_size > 0
+    camera = table.split("### Camera use")[1].split("###")[0]
+    assert len([line for line in camera.splitlines() if line.startswith("| ")]) == 2  # head, K=1

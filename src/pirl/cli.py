@@ -38,6 +38,7 @@ from pirl.terminal import (
     print_site_report,
     summary_table,
     training_ended,
+    uavs_option,
 )
 
 app = typer.Typer(
@@ -279,6 +280,13 @@ def evaluate(
     overwrite: Annotated[
         bool, typer.Option(help="Replace the results already in --out (refused otherwise).")
     ] = False,
+    uavs: Annotated[
+        list[int] | None,
+        uavs_option(
+            "Fleet sizes (docs/fleets.md): each scenario flown by K UAVs, K = 1 included, with "
+            "makespans and speed-ups; default one UAV."
+        ),
+    ] = None,
 ) -> None:
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
     from rich.progress import Progress
@@ -293,7 +301,7 @@ def evaluate(
                 episodes, sim or ["grid"],
                 workers, preset_path(config) if config is not None else None, advisor,
                 act, overwrite, progress=episode_progress(bar, "episodes"),
-                ray_address=ray_address, sites=list(site or []),
+                ray_address=ray_address, sites=list(site or []), uavs=uavs or [1],
             )  # fmt: skip
     except KeyboardInterrupt:
         raise interrupted(

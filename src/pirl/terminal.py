@@ -58,6 +58,11 @@ RayOpt = Annotated[
 T = TypeVar("T")
 
 
+def uavs_option(help: str) -> Any:
+    """``--uavs K[,K...]``: fleet sizes (whole numbers; their bounds are the env's)."""
+    return list_option("--uavs", help, "K[,K...]", int, "a whole number of UAVs")
+
+
 def bad_value(option: str, value: str, why: str) -> typer.Exit:
     """A wrong value of an option, seen while parsing: one line and exit 2 (the project's rule
     for a user's mistake; Typer's own error is a usage box)."""
@@ -245,18 +250,24 @@ def episode_progress(bar: Any, label: str) -> Any:
 def summary_table(path: Path) -> Table:
     from pirl.evaluate.summary import read_summary
 
+    rows = read_summary(path)
+    # A fleet's rows say their fleet size and speed-up (makespan to 0.99, over one UAV's).
+    fleet = any(int(r.get("uavs", 1)) > 1 for r in rows)
     table = Table(title=f"{path} (mean ± 95% CI over episodes; IQM [interval] over seeds)")
-    for col in ("method", "sim", "act", "size", "n", "seeds", "VCR", "BE", "RVC", "VCR IQM"):
+    columns = ["method", "sim", "act", "size", *(["UAVs"] if fleet else []), "n", "seeds"]
+    for col in (*columns, "VCR", "BE", "RVC", "VCR IQM", *(["speed-up"] if fleet else [])):
         table.add_column(col)
-    for row in read_summary(path):
+    for row in rows:
         cells = [mean_ci(row[m + "_mean"], row[m + "_ci95"]) for m in ("vcr", "be", "rvc")]
         seeds = int(row.get("seeds", 1))
         iqm = f"{row['vcr_iqm']:.3f}"
         if seeds > 1:
             iqm += f" [{row['vcr_iqm_lo']:.3f}, {row['vcr_iqm_hi']:.3f}]"
+        uavs = [str(int(row.get("uavs", 1)))] if fleet else []
+        speed = [mean_ci(row["speed_up_mean"], row["speed_up_ci95"])] if fleet else []
         table.add_row(
-            row["label"], row["sim"], row.get("act", ""), row["size"], str(int(row["n"])),
-            str(seeds), *cells, iqm,
+            row["label"], row["sim"], row.get("act", ""), row["size"], *uavs, str(int(row["n"])),
+            str(seeds), *cells, iqm, *speed,
         )  # fmt: skip
     return table
 

@@ -68,6 +68,10 @@ class Method:
     report's gap, the missions, the states a teacher phase asks about)."""
     animated: bool = True
     """``pirl reproduce`` records a GIF of it (a random walk's animation shows nothing)."""
+    fleet: bool = True
+    """It can fly in a fleet (``--uavs``): a learned policy shared by every UAV, the planner
+    over the area split, one random walk per UAV. LLM-only asks one prompt per UAV that does
+    not know its teammates, so it flies alone."""
     options: tuple[str, ...] = ()
     """The ``pirl train`` options of this method beyond those every method takes (``--out``,
     ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
@@ -124,6 +128,7 @@ METHODS: dict[str, Method] = {
             training=PLAYED,
             asks=True,
             policy="pirl.agents.llm_only:LLMOnlyPolicy",
+            fleet=False,
         ),
         Method(
             "il",

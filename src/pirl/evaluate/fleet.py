@@ -1,24 +1,33 @@
 """A fleet's episodes: K UAVs cover one world, each with its own policy (the planner's split,
-or one learned policy shared by every UAV), measured by the fleet's coverage over time.
+one learned policy shared by every UAV, or one random policy per UAV), measured by the
+fleet's coverage over time.
 
-Rows carry ``uavs``, the fleet VCR, ``makespan_95`` and ``makespan_99`` (the fleet's steps
-until it had covered 0.95 and 0.99 of the seeable cells; None when never), the energy used
-(full batteries), ``uav_overlap`` (cells seen by more than one UAV, over cells seen),
-``near_misses`` (pairs of UAVs in face-adjacent cells, summed over steps), yields and
-collisions. The speed-up of K UAVs is ``makespan(K) / makespan(1)`` from the same seed (UAV
-1 starts where the single UAV starts).
+A fleet row holds the single-UAV row's headline metrics for the fleet (``vcr`` of the
+fleet's coverage; ``steps`` the fleet's clock; ``battery_left`` the UAVs' mean; ``be`` and
+``rvc`` from those and the summed redundant cells) and the fleet's own: ``uavs``,
+``makespan_95`` and ``makespan_99`` (the fleet's steps until it had covered 0.95 and 0.99 of
+the seeable cells; None when never), ``energy_used`` (full batteries), ``uav_overlap``
+(ground cells seen by more than one UAV, over cells seen; ``overlap`` keeps the single-UAV
+meaning, cells seen by several views of one step), ``near_misses`` (pairs of UAVs in
+face-adjacent cells, summed over steps), yields, collisions, each UAV's credited cells and
+``coverage_steps`` (the fleet's step at which it first covered 5%, 10%, ... 100% of the
+seeable cells, None when never: the coverage-over-time curve). The speed-up of K UAVs is
+``makespan(K) / makespan(1)`` from the same seed (UAV 1 starts where the single UAV starts).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from gymnasium.utils import seeding
 
-from pirl.agents.boustrophedon import fleet_planners
-from pirl.agents.policy import Policy
+from pirl.agents.boustrophedon import BoustrophedonPolicy, fleet_planners
+from pirl.agents.loading import LearnedPolicy, act_rng
+from pirl.agents.policy import Policy, RandomPolicy
+from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.world import dynamics as D
@@ -27,9 +36,79 @@ from pirl.world.state import WorldBatch
 
 MILESTONES = (0.95, 0.99)
 """Shares of the seeable cells whose first step is a fleet's makespan."""
+CURVE = tuple(round(0.05 * i, 2) for i in range(1, 21))
+"""Shares of the seeable cells whose first step a fleet row records (``coverage_steps``)."""
+_UAV_SALT = 0xF1EE7
 
-PolicyFactory = Callable[[WorldBatch, int], Sequence[Policy]]
-"""Builds the K policies of world ``g`` (after its reset), one per UAV in slot order."""
+
+class Team:
+    """The K UAVs' choices in one world: ``reset`` at the start of an episode, then ``act``
+    once per step with every UAV's observation and info and whether it is still in the
+    episode (a UAV that has left must be given :data:`~pirl.world.dynamics.PARKED`)."""
+
+    def reset(self, world: WorldBatch, g: int, seed: int) -> None:
+        raise NotImplementedError
+
+    def act(self, obs: np.ndarray, infos: list[dict[str, Any]], active: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+class PolicyTeam(Team):
+    """One policy object per UAV, built for each episode by ``build(world, g)``."""
+
+    def __init__(self, build: Any) -> None:
+        self._build = build
+        self._team: list[Policy] = []
+
+    def reset(self, world: WorldBatch, g: int, seed: int) -> None:
+        self._team = list(self._build(world, g))
+        k = world.uavs
+        for u, policy in enumerate(self._team):
+            policy.reset(world, g * k + u, seed=uav_seed(seed, u))
+
+    def act(self, obs: np.ndarray, infos: list[dict[str, Any]], active: np.ndarray) -> np.ndarray:
+        return np.array(
+            [p.act(obs[u], infos[u]) if active[u] else D.PARKED for u, p in enumerate(self._team)],
+            dtype=np.int64,
+        )
+
+
+class SharedTeam(Team):
+    """One learned policy shared by every UAV (parameter sharing): one forward pass per step
+    for the whole fleet, each UAV sampling with its own generator when acting stochastic
+    (UAV 1's is the single UAV's, so K = 1 acts as ``pirl evaluate`` does)."""
+
+    def __init__(self, policy: LearnedPolicy) -> None:
+        self.policy = policy
+        self._rngs: list[np.random.Generator] = []
+
+    def reset(self, world: WorldBatch, g: int, seed: int) -> None:
+        self._rngs = [act_rng(uav_seed(seed, u)) for u in range(world.uavs)]
+
+    def act(self, obs: np.ndarray, infos: list[dict[str, Any]], active: np.ndarray) -> np.ndarray:
+        masks = np.array([i["action_mask"] for i in infos], dtype=bool)
+        actions = self.policy.act_batch(np.asarray(obs), self._rngs, masks).astype(np.int64)
+        return np.where(active, actions, D.PARKED)
+
+
+def uav_seed(seed: int, u: int) -> int:
+    """The seed UAV ``u``'s policy is reset with: the scenario's for UAV 1 (index 0), so a
+    fleet of one acts as the single UAV acts, a distinct one for each teammate."""
+    if u == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, _UAV_SALT, u]).generate_state(1)[0])
+
+
+def team_for(policy: Policy) -> Team:
+    """The fleet version of a method's policy: the planner flies the area split, a learned
+    policy is shared, a random policy is one per UAV; anything else cannot fly in a fleet."""
+    if isinstance(policy, BoustrophedonPolicy):
+        return PolicyTeam(fleet_planners)
+    if isinstance(policy, LearnedPolicy):
+        return SharedTeam(policy)
+    if isinstance(policy, RandomPolicy):
+        return PolicyTeam(lambda world, g: [RandomPolicy() for _ in range(world.uavs)])
+    raise ConfigError(f"{policy.label} flies one UAV; a fleet (--uavs above 1) cannot use it")
 
 
 @dataclass
@@ -37,50 +116,64 @@ class FleetEpisode:
     """One fleet episode: its row, and the fleet's coverage after each step."""
 
     seed: int
-    row: dict[str, float | int | None | list[int]]
+    row: dict[str, Any]
     coverage: list[float] = field(default_factory=list)
 
 
-def planner_fleet(world: WorldBatch, g: int) -> Sequence[Policy]:
-    """The classical baseline: the area split, then the boustrophedon planner per part."""
-    return fleet_planners(world, g)
-
-
-def run_fleet_episode(
-    cfg: VCPPConfig, seed: int, policies: PolicyFactory = planner_fleet
-) -> FleetEpisode:
+def run_fleet_episode(cfg: VCPPConfig, seed: int, team: Team | None = None) -> FleetEpisode:
     """Reset a world of ``cfg.uavs`` UAVs with ``seed`` (as ``VCPPEnv.reset(seed=seed)`` and
-    :class:`~pirl.env.fleet.FleetParallelEnv` do) and fly every UAV with its policy until the
-    fleet's episode ends."""
+    :class:`~pirl.env.fleet.FleetParallelEnv` do) and let ``team`` (default: the planner's
+    split) fly it until the fleet's episode ends."""
+    team = team or PolicyTeam(fleet_planners)
     core = EnvCore(cfg, 1)
     core.reset_world(0, seeding.np_random(seed)[0])
     world = core.world
-    k = world.uavs
-    team = list(policies(world, 0))
-    for u, policy in enumerate(team):
-        policy.reset(world, u, seed=seed)
+    team.reset(world, 0, seed)
     infos = core.infos()
     coverage = [_coverage(world)]
-    first = dict.fromkeys(MILESTONES)
     while True:
-        actions = np.full(k, D.PARKED, dtype=np.int64)
-        for u, policy in enumerate(team):
-            if not world.left[u]:
-                actions[u] = policy.act(core.obs[u], infos[u])
-        core.step(actions)
+        core.step(team.act(core.obs, infos, ~world.left[: world.uavs].astype(bool)))
         infos = core.infos()
         coverage.append(_coverage(world))
-        for share in MILESTONES:
-            if first[share] is None and coverage[-1] >= share:
-                first[share] = len(coverage) - 1
         if len(core.worlds_over()):
             break
-    row = {
-        **fleet_metrics(world, 0),
-        "makespan_95": first[0.95],
-        "makespan_99": first[0.99],
+    return FleetEpisode(seed, fleet_row(world, 0, coverage), coverage)
+
+
+def fleet_row(world: WorldBatch, g: int, coverage: Sequence[float]) -> dict[str, Any]:
+    """The row of world ``g``'s fleet episode (see the module's docstring); ``coverage`` is
+    the fleet's coverage after each step, from the reset on."""
+    k = world.uavs
+    rows = slice(g * k, g * k + k)
+    st = world.status[rows]
+    fleet = fleet_metrics(world, g)
+    covered = fleet["covered"]
+    battery_left = float(np.mean([world.battery(s) for s in range(g * k, g * k + k)]))
+    everything = int(world.coverable_all[g])
+    guarded = int(world.guarded[rows].sum())
+    uav_steps = int(st["steps"].sum())
+    curve = np.asarray(coverage)
+    return {
+        **fleet,
+        "vcr_all": covered / everything if everything else 0.0,
+        "be": fleet["vcr"] / (2.0 - battery_left),
+        "rvc": int(st["redundant_cells"].sum()) / covered if covered else 0.0,
+        "overlap": int(st["multi_cells"].sum()) / covered if covered else 0.0,
+        "steps": fleet["fleet_steps"],
+        "uav_steps": uav_steps,
+        "battery_left": battery_left,
+        "guarded_steps": guarded,
+        "guarded_share": guarded / uav_steps if uav_steps else 0.0,
+        "steps_to_99": _first(curve, 0.99),
+        "makespan_95": _first(curve, 0.95),
+        "makespan_99": _first(curve, 0.99),
+        "coverage_steps": [_first(curve, share) for share in CURVE],
     }
-    return FleetEpisode(seed, row, coverage)
+
+
+def _first(curve: np.ndarray, share: float) -> int | None:
+    reached = np.flatnonzero(curve >= share - 1e-12)
+    return int(reached[0]) if len(reached) else None
 
 
 def _coverage(world: WorldBatch) -> float:
@@ -104,4 +197,15 @@ def speed_ups(rows: dict[int, list[dict]], key: str = "makespan_99") -> dict[int
     return out
 
 
-__all__ = ["FleetEpisode", "planner_fleet", "run_fleet_episode", "speed_ups"]
+__all__ = [
+    "CURVE",
+    "FleetEpisode",
+    "PolicyTeam",
+    "SharedTeam",
+    "Team",
+    "fleet_row",
+    "run_fleet_episode",
+    "speed_ups",
+    "team_for",
+    "uav_seed",
+]

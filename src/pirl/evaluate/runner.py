@@ -134,6 +134,10 @@ class EvalPlan:
     batched: bool = True
     """Grid episodes of a trained policy run batched (one forward per step for all scenarios
     of a chunk); False plays them one by one (the same results, slower)."""
+    uavs: list[int] = field(default_factory=lambda: [1])
+    """Fleet sizes. ``[1]`` plays today's single UAV; any other list plays every size as a
+    fleet (K = 1 included, so every row has the fleet's makespans and speed-ups divide by
+    K = 1 from the same seed), on the grid only (:mod:`pirl.evaluate.fleet`)."""
 
 
 # -- worker side ---------------------------------------------------------------------------
@@ -174,9 +178,11 @@ def run_chunk(
     seeds: list[int],
     act: str = FIXED,
     batched: bool = True,
+    uavs: int | None = None,
 ) -> list[dict[str, Any]]:
     """Play ``spec`` on each seed of ``size`` (or of the site folder ``size`` names) acting
-    ``act``; one record per episode."""
+    ``act``; one record per episode. ``uavs`` plays a fleet of that many UAVs
+    (:func:`~pirl.evaluate.fleet.run_fleet_episode`); None the single UAV."""
     import torch
 
     from pirl import _quiet
@@ -204,6 +210,27 @@ def run_chunk(
     policy = _policy(spec, config)
     if act != FIXED:
         policy.set_act(act)
+    if uavs is not None:
+        from pirl.evaluate.fleet import run_fleet_episode, team_for
+
+        env_cfg = env_cfg.replace(uavs=uavs)
+        team = team_for(policy)
+        where["uavs"] = uavs
+        return [
+            {
+                "method": spec.key,
+                "label": spec.label,
+                "sim": sim,
+                "act": act,
+                **where,
+                "seed": seed,
+                "train_seed": spec.train_seed,
+                "source": spec.source,
+                **run_fleet_episode(env_cfg, seed, team).row,
+                "llm_calls": 0,
+            }  # fmt: skip
+            for seed in seeds
+        ]
     records = []
     batch: list[dict[str, float]] = []
     if sim == "grid" and act != FIXED and batched:
@@ -247,12 +274,14 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
             batched = plan.batched and sim == "grid" and act != FIXED
             worlds: list[Any] = list(plan.sim_sizes.get(sim, plan.sizes))
             worlds += plan.sim_sites.get(sim, plan.sites)
+            fleets: list[int | None] = [None] if plan.uavs == [1] else list(plan.uavs)
             for size in worlds:
                 seeds = scenario_seeds(_grid_size(size), episodes)
-                parts = max(1, workers if batched else 2 * workers)
-                chunk = max(1, math.ceil(len(seeds) / parts))
-                for i in range(0, len(seeds), chunk):
-                    tasks.append((spec, size, sim, seeds[i : i + chunk], act))
+                for uavs in fleets:
+                    parts = max(1, workers if batched and uavs is None else 2 * workers)
+                    chunk = max(1, math.ceil(len(seeds) / parts))
+                    for i in range(0, len(seeds), chunk):
+                        tasks.append((spec, size, sim, seeds[i : i + chunk], act, uavs))
     # Longest first, so no long episode starts last while the other workers idle: the
     # physics simulator's (seconds each), then the grid's largest worlds.
     tasks.sort(key=lambda t: (t[2] != Sim.PHYSICS, -_grid_size(t[1])[0] * _grid_size(t[1])[1]))
@@ -272,6 +301,36 @@ def _act_sims(plan: EvalPlan, spec: MethodSpec) -> list[tuple[str, str]]:
     if spec.source in BUILTIN:
         return [(FIXED, sim) for sim in plan.sims]
     return [(a, sim) for a in plan.acts for sim in plan.sims if a in plan.sim_acts.get(sim, [a])]
+
+
+def check_fleet(plan: EvalPlan) -> None:
+    """Fleet sizes a plan can play, refused in one line: each K within the env's bounds, the
+    grid simulator only (a fleet is flown in physics from its missions: ``pirl fly``), and
+    methods that can fly in a fleet (:attr:`Method.fleet`)."""
+    if plan.uavs == [1]:
+        return
+    for k in plan.uavs:
+        plan.env.replace(uavs=k)  # the env's own bounds and message
+    if any(sim != Sim.GRID for sim in plan.sims):
+        raise ConfigError(
+            f"--uavs {','.join(map(str, plan.uavs))} plays fleets on the grid only (--sim grid); "
+            "a fleet's missions fly together in physics with pirl fly"
+        )
+    for spec in plan.specs:
+        name = spec.source if spec.source in BUILTIN else spec.key.split(":")[0]
+        found = METHODS.get(name)
+        if found is not None and not found.fleet:
+            raise ConfigError(f"--uavs: {found.label} flies one UAV; leave it out of a fleet")
+
+
+def check_fleet_starts(env: VCPPConfig, uavs: int) -> None:
+    """Refuse (one line) a fleet larger than the free cells next to a world's start can hold:
+    one world of ``uavs`` UAVs is reset as every scenario is."""
+    from gymnasium.utils import seeding
+
+    from pirl.env.core import EnvCore
+
+    EnvCore(env.replace(uavs=uavs), 1).reset_world(0, seeding.np_random(0)[0])
 
 
 def check_workers(workers: int | None) -> None:
@@ -304,6 +363,7 @@ def evaluate(
     if not plan.specs:
         raise ConfigError("nothing to evaluate: give --runs and/or --methods")
     plan.acts = parse_acts(plan.acts)
+    check_fleet(plan)
     plan.specs = distinct_specs(plan.specs)
     _check_observations(plan)
     out = Path(out)
@@ -314,8 +374,10 @@ def evaluate(
     records: list[dict[str, Any]] = []
     done = 0
     if workers <= 1 and executor_factory is None:
-        for spec, size, sim, seeds, act in tasks:
-            records += run_chunk(spec, env_dict, config_dict, size, sim, seeds, act, plan.batched)
+        for spec, size, sim, seeds, act, uavs in tasks:
+            records += run_chunk(
+                spec, env_dict, config_dict, size, sim, seeds, act, plan.batched, uavs
+            )
             done += len(seeds)
             if progress:
                 progress(done, total)
@@ -324,9 +386,18 @@ def evaluate(
         with factory(workers) as pool:
             futures = {
                 pool.submit(
-                    run_chunk, spec, env_dict, config_dict, size, sim, seeds, act, plan.batched
+                    run_chunk,
+                    spec,
+                    env_dict,
+                    config_dict,
+                    size,
+                    sim,
+                    seeds,
+                    act,
+                    plan.batched,
+                    uavs,
                 ): len(seeds)
-                for spec, size, sim, seeds, act in tasks
+                for spec, size, sim, seeds, act, uavs in tasks
             }
             for future in as_completed(futures):
                 records += future.result()
@@ -334,7 +405,15 @@ def evaluate(
                 if progress:
                     progress(done, total)
     records.sort(
-        key=lambda r: (r["method"], r["sim"], r["act"], r["size"], str(r["source"]), r["seed"])
+        key=lambda r: (
+            r["method"],
+            r["sim"],
+            r["act"],
+            r["size"],
+            r.get("uavs", 0),
+            str(r["source"]),
+            r["seed"],
+        )  # fmt: skip
     )
     _write_jsonl(out / "episodes.jsonl", records)
     write_summary(records, out / "summary.csv")
@@ -347,6 +426,7 @@ def evaluate(
                 "episodes_per_method": plan.episodes_per_method,
                 "sims": plan.sims,
                 "acts": plan.acts,
+                "uavs": plan.uavs,
                 "env": env_dict,
                 PhysicsConfig.section: config_dict[PhysicsConfig.section],
             },
@@ -481,6 +561,7 @@ def evaluate_runs(
     progress: Callable[[int, int], None] | None = None,
     ray_address: str | None = None,
     sites: list[Path] | None = None,
+    uavs: list[int] | None = None,
 ) -> Path:
     """``pirl evaluate``: finished ``runs`` and ``builtins`` on the same scenarios of each of
     ``sizes`` and of each site folder of ``sites`` (zero-shot: a site's start cells, its
@@ -535,6 +616,10 @@ def evaluate_runs(
         config=cfg,
         acts=acts,
         sites=site_list,
+        uavs=sorted(set(uavs or [1])),
     )
+    check_fleet(plan)
+    for site in site_list if plan.uavs != [1] else []:
+        check_fleet_starts(with_site(cfg.env, site), max(plan.uavs))
     with folder_lock(out):
         return evaluate(plan, out, workers, progress=progress, ray_address=ray_address)

@@ -36,13 +36,18 @@ OTHER = (
     "overlap", "views_per_cell", "steps", "collisions", "battery_left", "camera_share",
     "mean_footprint", "final_tilt", "final_zoom", "llm_calls", "guarded_share",
 )  # fmt: skip
+FLEET = ("makespan_95", "energy_used", "uav_overlap", "near_misses")
+"""A fleet's own metrics (:mod:`pirl.evaluate.fleet`), averaged where reached (nan for a
+single UAV's rows)."""
 COLUMNS = (
     ["method", "sim", "size", "n"]
     + [f"{m}_{s}" for m in HEADLINE for s in ("mean", "ci95")]
     + ["act", "seeds"]
     + [f"{m}_{s}" for m in HEADLINE for s in ("iqm", "iqm_lo", "iqm_hi", "mean_lo", "mean_hi")]
     + [f"{m}_mean" for m in OTHER]
-    + ["steps_to_99_mean", "reached_99", "loop_episodes", "label"]
+    + ["steps_to_99_mean", "reached_99", "loop_episodes", "uavs"]
+    + [f"{m}_mean" for m in FLEET]
+    + ["speed_up_mean", "speed_up_ci95", "label"]
 )
 SITE_PREFIX = "site:"
 """The ``size`` of a site's episode rows: ``site:<name>`` (its grid size is ``grid``)."""
@@ -146,12 +151,15 @@ def probability_of_improvement(
 
 def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per (method, sim, size, act), in a stable order."""
-    groups: dict[tuple[str, str, str, str], list[dict[str, Any]]] = defaultdict(list)
+    groups: dict[tuple[str, str, str, str, int], list[dict[str, Any]]] = defaultdict(list)
     for r in records:
-        groups[(r["method"], r["sim"], r["size"], r.get("act", "greedy"))].append(r)
+        key = (r["method"], r["sim"], r["size"], r.get("act", "greedy"), r.get("uavs", 1))
+        groups[key].append(r)
     rows = []
-    for (method, sim, size, act), group in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+    for key, group in sorted(groups.items(), key=lambda kv: _order(kv[0])):
+        method, sim, size, act, uavs = key
         row: dict[str, Any] = {"method": method, "sim": sim, "size": size, "act": act}
+        row["uavs"] = uavs
         row["n"] = len(group)
         for metric in HEADLINE:
             row[f"{metric}_mean"], row[f"{metric}_ci95"] = mean_ci95(g[metric] for g in group)
@@ -168,9 +176,34 @@ def summarize(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
         row["steps_to_99_mean"] = float(np.mean(near)) if near else math.nan
         row["reached_99"] = len(near)
         row["loop_episodes"] = loop_episodes(group)
+        for metric in FLEET:
+            reached = [g[metric] for g in group if g.get(metric) is not None]
+            row[f"{metric}_mean"] = float(np.mean(reached)) if reached else math.nan
+        ratios = speed_up_ratios(group, groups.get((method, sim, size, act, 1), []))
+        row["speed_up_mean"], row["speed_up_ci95"] = (
+            mean_ci95(ratios) if ratios else (math.nan, math.nan)
+        )
         row["label"] = honest_label(group[0].get("label", method), _sources(group))
         rows.append(row)
     return rows
+
+
+def speed_up_ratios(fleet: list[dict[str, Any]], single: list[dict[str, Any]]) -> list[float]:
+    """makespan_99(K) / makespan_99(1) per scenario (same seed, same trained run), for the
+    fleet rows of ``fleet`` whose K = 1 twin in ``single`` is a fleet row too; empty when any
+    pair never reached 0.99 (a speed-up is then not defined) or when there is no twin."""
+    ones = {
+        (r.get("seed"), str(r.get("source"))): r["makespan_99"]
+        for r in single
+        if "makespan_99" in r
+    }
+    ratios = []
+    for r in fleet:
+        one = ones.get((r.get("seed"), str(r.get("source"))))
+        if one is None or r.get("makespan_99") is None:
+            return []
+        ratios.append(r["makespan_99"] / one)
+    return ratios
 
 
 def loop_episodes(group: list[dict[str, Any]]) -> int:
@@ -231,9 +264,9 @@ def unshaped_warnings(rows: list[dict[str, Any]]) -> list[str]:
     ]
 
 
-def _order(key: tuple[str, ...]) -> tuple:
-    method, sim, size, act = key
-    return (sim, act, method, size_key(size))
+def _order(key: tuple) -> tuple:
+    method, sim, size, act, uavs = key
+    return (sim, act, method, size_key(size), uavs)
 
 
 def size_key(size: str) -> tuple:

@@ -453,18 +453,27 @@ def write_report(
     hold the tables of :func:`result_tables`; report.html ends with the bar figures, learning
     curves, animations, advisor statistics and each run's config.yaml as written.
     """
+    from pirl.report.fleets import coverage_figure, fleet_table, single
+
     folder.mkdir(parents=True, exist_ok=True)
-    rows = read_summary(summary)
-    acts = acts_of(rows, headline_act)
+    every_row = read_summary(summary)
     episodes = Path(summary).with_name("episodes.jsonl")
-    records = [json.loads(line) for line in episodes.open()] if episodes.is_file() else []
+    every_record = [json.loads(line) for line in episodes.open()] if episodes.is_file() else []
+    # The paper's tables compare single UAVs; fleets (--uavs) get their own table and figure.
+    rows, records = single(every_row), single(every_record)
+    acts = acts_of(rows, headline_act)
+    every_name = display_names(every_row)
+    fleets = fleet_table(every_row, every_name)
+    figure = coverage_figure(every_record, folder / "fleet_coverage.png", every_name)
+    fleet_figures = [("Fleet coverage against time (median over scenarios)", figure)]
     found = improvements(records, acts[0]) if records else []
     said = summary_lines(rows, found, advisor_stats, acts[0])
     top = Table("Summary", bullets=said, level=2, anchor="summary")
     names = display_names(rows)
     results = result_tables(
-        rows, records, acts, advisor_stats, [t for _, t, _ in extras], found, names
-    )
+        rows, records, acts, advisor_stats,
+        [t for _, t, _ in extras] + ([fleets] if fleets else []), found, names,
+    )  # fmt: skip
     (folder / "table.md").write_text(render_markdown([top, *results]))
     glance_tables = [
         Table("Summary", level=2, anchor="summary"),
@@ -480,6 +489,7 @@ def write_report(
         if any(r["sim"] == "grid" for r in rows)
     ]  # fmt: skip
     glance += [_image(title, title, figure) for title, _, figure in extras]
+    glance += [_image(title, title, figure) for title, figure in fleet_figures if figure]
     sims = [Sim.GRID] + ([Sim.PHYSICS] if any(r["sim"] == Sim.PHYSICS for r in rows) else [])
     bars = [
         _image(f"Figure ({sim}, act {acts[0]}; per-episode spread)", f"{sim} bars",
