@@ -212,7 +212,7 @@ def test_a_trained_policy_plans_with_its_own_label(tmp_path: Path, ewri_runs) ->
 # -- flying the written files back ------------------------------------------------------------
 def test_camera_commands_invert_exactly_over_the_whole_grid() -> None:
     from pirl.config.grid import pan_steps, tilt_steps, zoom_steps
-    from pirl.missions import write as M
+    from pirl.missions import formats as M
 
     assert all(M.tilt_from_pitch(M.gimbal_pitch(t)) == t for t in tilt_steps())
     assert all(M.pan_from_yaw(M.gimbal_yaw(p)) == p for p in pan_steps())

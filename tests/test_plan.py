@@ -19,8 +19,10 @@ from pirl.config.run import RunConfig
 from pirl.evaluate.executors import ExecutorChoice
 from pirl.reproduce import pipeline as reproduce_module
 from pirl.reproduce import plan as plan_module
+from pirl.reproduce import schedule as schedule_module
 from pirl.reproduce.jobs import TEACHER, TrainJob
-from pirl.reproduce.plan import Plan, check_reproduce, executor_for, make_plan, run_plan
+from pirl.reproduce.plan import Plan, check_reproduce, make_plan
+from pirl.reproduce.schedule import executor_for, run_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST = ROOT / "configs" / "test.yaml"
@@ -108,7 +110,7 @@ def test_plan_runs_runs_once_per_pirl_reproduce(tmp_path, monkeypatch):
 def test_the_runner_starts_each_job_after_what_it_waits_for(tmp_path, monkeypatch):
     plan = _plan(tmp_path)
     logs: list[str] = []
-    monkeypatch.setattr(plan_module, "train_job", _stand_in(logs))
+    monkeypatch.setattr(schedule_module, "train_job", _stand_in(logs))
     run_plan(plan, ExecutorChoice("serial"), logs.append)
     assert (tmp_path / "runs").is_dir()
     assert [line[4:] for line in logs if line.startswith("ran ")] == [PHASE, *RUNS]
@@ -142,8 +144,8 @@ def test_the_same_runner_keeps_the_order_with_jobs_running_at_once(tmp_path, mon
         with ThreadPoolExecutor(2) as pool:
             yield pool, 2
 
-    monkeypatch.setattr(plan_module, "train_job", job)
-    monkeypatch.setattr(plan_module, "open_executor", two_threads)
+    monkeypatch.setattr(schedule_module, "train_job", job)
+    monkeypatch.setattr(schedule_module, "open_executor", two_threads)
     run_plan(plan, ExecutorChoice("processes", 2), logs.append)
     assert most[0] == 2  # two at once, never more than the executor runs
     for name, waits_for in (("pirl-local-s0", PHASE), ("il-s0", "ppo-ewri-s0")):
@@ -157,7 +159,7 @@ def test_the_same_runner_keeps_the_order_with_jobs_running_at_once(tmp_path, mon
 def test_a_failed_expert_stops_its_student_and_a_failed_phase_does_not(tmp_path, monkeypatch):
     plan = _plan(tmp_path)
     logs: list[str] = []
-    monkeypatch.setattr(plan_module, "train_job", _stand_in(logs, fail=(PHASE, "ppo-ewri-s0")))
+    monkeypatch.setattr(schedule_module, "train_job", _stand_in(logs, fail=(PHASE, "ppo-ewri-s0")))
     with pytest.raises(RuntimeError, match="ppo-ewri-s0 broke"):  # raised once all have ended
         run_plan(plan, ExecutorChoice("serial"), logs.append)
     assert f"{PHASE}: failed (RuntimeError: {PHASE} broke)" in logs
@@ -184,7 +186,7 @@ def test_a_resumable_or_broken_run_says_so_and_a_broken_one_starts_again(tmp_pat
         seen.append(job.name != "ppo-sr-s0" or not broken.exists())
         return stand_in(job, cfg_dict, show_progress)
 
-    monkeypatch.setattr(plan_module, "train_job", job)
+    monkeypatch.setattr(schedule_module, "train_job", job)
     run_plan(plan, ExecutorChoice("serial"), logs.append)
     assert all(seen)
     at = logs.index("ppo-sr-s0: incomplete with no checkpoint; starting again")

@@ -13,7 +13,7 @@ same :func:`~pirl.evaluate.runner.run_chunk` as the local worker processes, so t
 identical. Training: each job of a reproduction's plan (a run, or a teacher phase) runs
 :func:`pirl.reproduce.jobs.train_job`, the same function in this process, in a local process
 pool or in a Ray task; :func:`open_executor` opens the one that :class:`ExecutorChoice` names, and
-:func:`pirl.reproduce.plan.run_plan` submits the jobs to it in dependency order.
+:func:`pirl.reproduce.schedule.run_plan` submits the jobs to it in dependency order.
 
 Every node needs the same ``pirl`` installed, and the output folder must be on a filesystem
 that all nodes share at the same path (NFS or similar): workers read and write run folders

@@ -5,7 +5,7 @@ Nothing of the episode the mission was written from is used: the ``.plan`` files
 sortie, in order, as ``summary.json`` lists them) are read from disk and checked by
 :mod:`pirl.missions.read`, every waypoint's latitude, longitude and altitude (in its frame) is
 turned back into a grid cell through the same geo-reference the writer used, every gimbal and
-zoom command into a camera setting (the inverse functions of :mod:`pirl.missions.write`),
+zoom command into a camera setting (the inverse functions of :mod:`pirl.missions.formats`),
 and a :class:`FileFollower` flies them as the grid's own actions: one-cell moves towards the
 next waypoint from wherever the wind left the drone, camera steps towards the next setting.
 The :class:`~pirl.physics.flight.Mission` books coverage and energy with the same rules as
@@ -32,6 +32,8 @@ from pirl.config.errors import ConfigError, UserError
 from pirl.config.mission import MissionSettings
 from pirl.config.physics import PhysicsConfig
 from pirl.config.world import VCPPConfig
+from pirl.missions.formats import pan_from_yaw, tilt_from_pitch, zoom10_from_percent
+from pirl.missions.items import Geo
 from pirl.missions.read import (
     GOTO,
     MissionFile,
@@ -43,14 +45,7 @@ from pirl.missions.read import (
     role,
 )
 from pirl.missions.staging import pid_alive
-from pirl.missions.write import (
-    Geo,
-    file_digest,
-    geo_for,
-    pan_from_yaw,
-    tilt_from_pitch,
-    zoom10_from_percent,
-)
+from pirl.missions.write import file_digest, geo_for
 from pirl.world import dynamics as D
 
 Cell = tuple[int, int, int]

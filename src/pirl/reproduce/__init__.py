@@ -1,2 +1,2 @@
-"""The reproduction (``pirl reproduce``): its plan, its training jobs and the sequence that
-trains, evaluates, flies and reports."""
+"""The reproduction (``pirl reproduce``): its plan, its scheduler, its training jobs and the
+sequence that trains, evaluates, flies and reports."""

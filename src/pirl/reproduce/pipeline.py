@@ -35,13 +35,12 @@ from pirl.reproduce.plan import (
     Log,
     Plan,
     check_reproduce,
-    executor_for,
     make_plan,
     pirl_variants,
-    run_plan,
     steps_text,
     variant_name,
 )
+from pirl.reproduce.schedule import executor_for, run_plan
 
 GIF_SIZE = (30, 30, 3)
 
@@ -59,7 +58,7 @@ def train_all(
 
     With ``workers`` > 1 the runs train in that many spawned processes at once, each with one
     torch and one numba thread; with ``ray_address`` they go to Ray instead. A run trains the
-    same model whichever way (:func:`~pirl.reproduce.plan.run_plan`).
+    same model whichever way (:func:`~pirl.reproduce.schedule.run_plan`).
     """
     checked = check_reproduce(cfg, advisor, workers)  # refused before any folder is made
     with folder_lock(Path(out)):  # the plan reads the run folders already there
