@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import common as mav
@@ -328,3 +329,69 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
     markdown = render_markdown([table])
     assert "](../missions/block-planner/mission.plan)" in markdown
     assert "best mean grid VCR on block" in markdown and figure.is_file()
+
+
+# -- a fleet's missions ------------------------------------------------------------------------
+def test_a_fleet_writes_one_mission_per_uav_kept_apart_in_time(tmp_path: Path) -> None:
+    """``pirl plan --uavs 3``: uav-1/ .. uav-3/ each a full mission that pymavlink reads back,
+    homes at distinct start cells, and fleet.json's separation holds when every UAV's track is
+    sampled again, ten times finer, from the written .plan files' own items."""
+    from pirl.agents.boustrophedon import BoustrophedonPolicy
+    from pirl.config.mission import MissionSettings
+    from pirl.config.world import VCPPConfig
+    from pirl.evaluate.fleet import team_for
+    from pirl.missions.fleet import record_fleet
+    from pirl.missions.separation import _gaps as gaps
+    from pirl.missions.separation import track
+    from pirl.missions.write import plan_episode
+
+    out = tmp_path / "fleet"
+    proc = plan(out, "--size", "20", "20", "3", "--seed", "4", "--uavs", "3")
+    assert "3 UAVs: fleet VCR" in proc.stdout and "separation 5 m held" in proc.stdout
+    fleet = json.loads((out / "fleet.json").read_text())
+    assert fleet["uavs"] == 3 and fleet["vcr"] >= 0.99 and fleet["collisions"] == 0
+    assert sorted(p.name for p in out.iterdir()) == ["fleet.json", "uav-1", "uav-2", "uav-3"]
+    env = VCPPConfig.from_dict(fleet["env"])
+    episodes, _ = record_fleet(env, team_for(BoustrophedonPolicy()), 4)
+    homes = set()
+    settings = MissionSettings.from_dict({**fleet["mission"], "check_every_s": 0.025})
+    positions = []
+    for u, member in enumerate(fleet["members"], start=1):
+        folder = out / f"uav-{u}"
+        summary = json.loads((folder / "summary.json").read_text())
+        homes.add(tuple(summary["home"]))
+        assert summary["sorties"] == member["sorties"] == 1
+        items = check_plan_against_waypoints(folder, "mission")
+        assert items[0]["command"] == mav.MAV_CMD_NAV_TAKEOFF
+        assert items[-1]["command"] == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+        # The track again, from the fleet's episode played again from fleet.json's env.
+        planned = plan_episode(episodes[u - 1], env, settings)
+        assert tuple(summary["home"]) == planned.geo.home
+        kinds = [(i.kind, i.cell) for i in planned.parts[0].items]
+        tr = track(kinds, planned.ep.start[:2], planned.geo.georef.cell_size_m,
+                   planned.geo.level_m, settings)  # fmt: skip
+        delay = member["takeoff_delay_s"][0]
+        clock = np.arange(0.0, tr.seconds + delay + 1.0, settings.check_every_s)
+        positions.append(tr.at(clock - delay))
+    assert len(homes) == 3
+    n = min(len(p) for p in positions)
+    for a in range(3):
+        for b in range(a + 1, 3):
+            h, v = gaps(positions[a][:n], positions[b][:n])
+            parked = (positions[a][:n, 2] <= 0) & (positions[b][:n, 2] <= 0)
+            assert ((h >= 5 - 1e-6) | (v >= 5 - 1e-6) | parked).all(), (a, b)
+
+
+def test_a_fleet_that_cannot_keep_apart_is_refused_in_one_line_and_writes_nothing(
+    tmp_path: Path,
+) -> None:
+    config = tmp_path / "tight.yaml"
+    config.write_text("mission:\n  separation_m: 60\n  max_delay_s: 0\n")
+    out = tmp_path / "fleet"
+    proc = pirl("plan", "--method", "boustrophedon", "--size", "20", "20", "3", "--uavs", "3",
+                "--config", str(config), "--out", str(out))  # fmt: skip
+    one_error_line(proc, "separation_m=60", "UAV 2")
+    assert not out.exists() and not list(tmp_path.glob(".fleet*"))
+    proc = pirl("plan", "--method", "boustrophedon", "--size", "20", "20", "3", "--uavs", "0",
+                "--out", str(out))  # fmt: skip
+    one_error_line(proc, "uavs")

@@ -33,6 +33,7 @@ from pirl.terminal import (
     metrics_table,
     or_list,
     print_advice_check,
+    print_fleet_summary,
     print_plan_summary,
     print_score,
     print_site_report,
@@ -411,6 +412,13 @@ def plan(
         str | None,
         typer.Option(help="physics: then read the written files back and fly them in PyFlyt."),
     ] = None,
+    uavs: Annotated[
+        int,
+        typer.Option(
+            help="A fleet of K UAVs: a mission folder per UAV (uav-1/, ...) and fleet.json, "
+            "kept apart in time (docs/fleets.md)."
+        ),
+    ] = 1,
 ) -> None:
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
@@ -421,6 +429,18 @@ def plan(
         raise ConfigError(f"--fly {fly!r}: allowed value is physics")
     cfg = load_preset(config)
     env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
+    if uavs != 1:
+        from pirl.evaluate.fleet import team_for
+        from pirl.missions.fleet import write_fleet_missions
+
+        if fly:
+            raise ConfigError("--fly: a fleet's folders fly one by one (pirl fly OUT/uav-1)")
+        fleet = env.replace(uavs=uavs)
+        summary = write_fleet_missions(
+            out, fleet, cfg.mission, team_for(chosen), seed, what, gimbal
+        )
+        print_fleet_summary(out, summary)
+        return
     summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
     print_plan_summary(what, summary, cfg.mission.speed_m_s)
     console.print(f"wrote {out}: {', '.join(summary['files'])}")

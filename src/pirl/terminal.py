@@ -437,6 +437,26 @@ def print_plan_summary(what: str, summary: dict[str, Any], speed_m_s: float) -> 
     )
 
 
+def print_fleet_summary(out: Path, fleet: dict[str, Any]) -> None:
+    """``pirl plan --uavs K``: the fleet's missions in three lines (coverage, time, distance)."""
+    apart = fleet["separation"]
+    delays = [max(m["takeoff_delay_s"], default=0.0) for m in fleet["members"]]
+    console.print(
+        f"{fleet['method']}, {fleet['uavs']} UAVs: fleet VCR {fleet['vcr']:.3f} over seeable "
+        f"cells in {fleet['grid_steps']} grid steps (0.99 at step {fleet['makespan_99']}); "
+        f"{fleet['flight_time_s'] / 60:.1f} min of flight, "
+        f"{sum(m['distance_m'] for m in fleet['members']):,.0f} m in all"
+    )
+    console.print(
+        f"separation {fleet['separation_m']:g} m held at {apart['samples']:,} instants: closest "
+        f"approach {apart['closest_horizontal_m']} m horizontally within "
+        f"{fleet['separation_m']:g} m of altitude, {apart['closest_3d_m']} m in 3-D; take-off "
+        f"delays up to {', '.join(f'{d:g}' for d in delays)} s"
+    )
+    folders = ", ".join(f"{m['folder']}/ ({m['sorties']} sortie(s))" for m in fleet["members"])
+    console.print(f"wrote {out}: {folders}, fleet.json")
+
+
 def training_ended(stop: Exception) -> typer.Exit:
     """A training run that ended early, in one line: Ctrl-C (exit 130) or an advisor that
     kept failing (exit 3); both say where the checkpoint is and how to continue."""

@@ -38,12 +38,24 @@ class MissionSettings(Settings, section="mission"):
     """Metres between flight levels of a generated world (a site has its own)."""
     autopilot: str = "px4"
     """The .plan's firmware type: px4 or ardupilot."""
+    separation_m: float = 5.0
+    """A fleet's missions (``pirl plan --uavs``): every pair of UAVs stays at least this far
+    apart horizontally or in altitude at every sampled instant (docs/fleets.md)."""
+    check_every_s: float = 0.25
+    """How often the separation check samples every UAV's position."""
+    max_delay_s: float = 120.0
+    """The longest a UAV's take-off may be held back for its separation before the plan is
+    refused."""
 
     def validate(self) -> None:
         """Positive speeds, times and sizes; a reserve in [0, 1); ordered altitude limits."""
         self.require_positive(
-            "speed_m_s", "climb_m_s", "battery_s", "max_items", "cell_size_m", "level_height_m"
-        )
+            "speed_m_s", "climb_m_s", "battery_s", "max_items", "cell_size_m", "level_height_m",
+            "check_every_s",
+        )  # fmt: skip
+        for key in ("separation_m", "max_delay_s"):
+            if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
+                raise self.refuse(key, "must be >= 0")
         if not (math.isfinite(self.photo_s) and self.photo_s >= 0):
             raise self.refuse("photo_s", "must be >= 0")
         if not 0 <= self.reserve < 1:

@@ -18,6 +18,9 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -251,23 +254,21 @@ def mission_source(
     return env, chosen, what
 
 
-def write_mission(
-    out: Path,
-    cfg: VCPPConfig,
-    settings: MissionSettings,
-    policy: Any,
-    seed: int,
-    what: str,
-    gimbal: str = "v2",
-) -> dict[str, Any]:
-    """Record the episode, write every file into the new folder ``out`` (atomically; refused
-    if it exists) and return the summary."""
-    out = Path(out)
-    if out.exists():
-        raise ConfigError(f"--out {out} already exists; choose a new folder")
-    if gimbal not in ("v1", "v2"):
-        raise ConfigError(f"--gimbal {gimbal!r}: allowed values are v1, v2")
-    ep = record_episode(cfg, policy, seed)
+@dataclass
+class Planned:
+    """An episode made into a mission: its geo-reference, its items (merged, and unmerged
+    for the summary's count) and its sorties."""
+
+    ep: Episode
+    geo: Geo
+    items: list[Item]
+    unmerged: list[Item]
+    parts: list[Sortie]
+
+
+def plan_episode(ep: Episode, cfg: VCPPConfig, settings: MissionSettings) -> Planned:
+    """The mission of ``ep``: items and sorties; refused (one line) when it flies outside
+    ``mission.min_alt_m`` and ``max_alt_m``."""
     geo = geo_for(cfg, settings, ep.start)
     levels = sorted({c[2] for c in [ep.start, *(s.cell for s in ep.steps)]})
     for z in (levels[0], levels[-1]):
@@ -280,9 +281,23 @@ def write_mission(
             )
     cell_m = geo.georef.cell_size_m
     items = mission_items(ep, cell_m)
-    unmerged = mission_items(ep, cell_m, merge=False)
-    parts = sorties(items, ep, geo, settings)
-    fence = fences(cfg, geo)
+    return Planned(
+        ep, geo, items, mission_items(ep, cell_m, merge=False), sorties(items, ep, geo, settings)
+    )
+
+
+def check_new_folder(out: Path, gimbal: str) -> None:
+    """Refuse (one line) an ``--out`` that exists or an unknown ``--gimbal``."""
+    if out.exists():
+        raise ConfigError(f"--out {out} already exists; choose a new folder")
+    if gimbal not in ("v1", "v2"):
+        raise ConfigError(f"--gimbal {gimbal!r}: allowed values are v1, v2")
+
+
+@contextmanager
+def staged(out: Path) -> Iterator[Path]:
+    """A staging folder beside ``out``, renamed into ``out`` whole when the block ends (and
+    removed if it fails): a kill at any moment leaves ``out`` absent or complete."""
     out.parent.mkdir(parents=True, exist_ok=True)
     # A run killed mid-write leaves its staging folder: the next run into this parent clears it.
     remove_stale_staging(out.parent)
@@ -293,66 +308,98 @@ def write_mission(
     os.umask(umask)
     tmp.chmod(0o777 & ~umask)  # a folder like any other, not mkdtemp's owner-only one
     try:
-        names = (
-            ["mission"] if len(parts) == 1 else [f"sortie-{n}" for n in range(1, len(parts) + 1)]
-        )
-        for name, sortie in zip(names, parts, strict=True):
-            mav_items = mavlink_items(sortie, geo, gimbal)
-            text = json.dumps(plan_json(mav_items, geo, settings, fence), indent=1)
-            (tmp / f"{name}.plan").write_text(text + "\n")
-            write_waypoints(tmp / f"{name}.waypoints", mav_items, geo)
-        features = geojson(ep, parts, geo)
-        (tmp / "path.geojson").write_text(json.dumps(features) + "\n")
-        where = "a real place" if geo.real else (
-            f"NOT A REAL PLACE: a generated world placed at {DEFAULT_ORIGIN} (PX4's simulated home)"
-        )  # fmt: skip
-        (tmp / "path.kml").write_text(kml(features, out.name, f"{what}; {where}"))
-        m = ep.metrics
-        summary = {
-            "method": what,
-            "seed": seed,
-            "site": cfg.site or None,
-            "size": list(cfg.size),
-            "real_place": geo.real,
-            "home": list(geo.home),
-            "gimbal": gimbal,
-            "sorties": len(parts),
-            "files": sorted(p.name for p in tmp.iterdir()),
-            # pirl fly names a file edited after writing (docs/missions.md).
-            "checksums": {p.name: file_digest(p) for p in sorted(tmp.iterdir())},
-            "items_per_sortie": [len(p.items) for p in parts],
-            "items_before_merging": len(unmerged) + 2,
-            "items_after_merging": len(items) + 2,
-            "distance_m": round(sum(p.distance_m for p in parts), 1),
-            "flight_time_s": round(sum(p.seconds for p in parts), 1),
-            "photos": sum(p.photos for p in parts),
-            "climbs": sum(
-                1
-                for a, b in zip(
-                    [ep.start, *(s.cell for s in ep.steps)],
-                    [s.cell for s in ep.steps],
-                    strict=False,
-                )
-                if b[2] > a[2]
-            ),  # fmt: skip
-            "vcr": m["vcr"],
-            "vcr_all": m.get("vcr_all", m["vcr"]),
-            "energy_used_grid": round(1.0 - m["battery_left"], 4),
-            "grid_steps": m["steps"],
-            # What `pirl fly` needs to fly the files back in the same world.
-            "env": cfg.to_dict(),
-            "mission": settings.to_dict(),
-        }
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        yield tmp
         os.replace(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def write_files(
+    folder: Path,
+    plan: Planned,
+    cfg: VCPPConfig,
+    settings: MissionSettings,
+    what: str,
+    seed: int,
+    gimbal: str,
+    name: str,
+) -> dict[str, Any]:
+    """Write one UAV's mission files and its ``summary.json`` into ``folder`` (made here);
+    ``name`` is what the KML calls it. Returns the summary."""
+    folder.mkdir(exist_ok=True)
+    ep, geo, parts = plan.ep, plan.geo, plan.parts
+    fence = fences(cfg, geo)
+    names = ["mission"] if len(parts) == 1 else [f"sortie-{n}" for n in range(1, len(parts) + 1)]
+    for file, sortie in zip(names, parts, strict=True):
+        mav_items = mavlink_items(sortie, geo, gimbal)
+        text = json.dumps(plan_json(mav_items, geo, settings, fence), indent=1)
+        (folder / f"{file}.plan").write_text(text + "\n")
+        write_waypoints(folder / f"{file}.waypoints", mav_items, geo)
+    features = geojson(ep, parts, geo)
+    (folder / "path.geojson").write_text(json.dumps(features) + "\n")
+    where = "a real place" if geo.real else (
+        f"NOT A REAL PLACE: a generated world placed at {DEFAULT_ORIGIN} (PX4's simulated home)"
+    )  # fmt: skip
+    (folder / "path.kml").write_text(kml(features, name, f"{what}; {where}"))
+    m = ep.metrics
+    cells = [ep.start, *(s.cell for s in ep.steps)]
+    summary = {
+        "method": what,
+        "seed": seed,
+        "site": cfg.site or None,
+        "size": list(cfg.size),
+        "real_place": geo.real,
+        "home": list(geo.home),
+        "gimbal": gimbal,
+        "sorties": len(parts),
+        "files": sorted(p.name for p in folder.iterdir()),
+        # pirl fly names a file edited after writing (docs/missions.md).
+        "checksums": {p.name: file_digest(p) for p in sorted(folder.iterdir())},
+        "items_per_sortie": [len(p.items) for p in parts],
+        "items_before_merging": len(plan.unmerged) + 2,
+        "items_after_merging": len(plan.items) + 2,
+        "distance_m": round(sum(p.distance_m for p in parts), 1),
+        "flight_time_s": round(sum(p.seconds for p in parts), 1),
+        "photos": sum(p.photos for p in parts),
+        "climbs": sum(1 for a, b in zip(cells, cells[1:], strict=False) if b[2] > a[2]),
+        "vcr": m["vcr"],
+        "vcr_all": m.get("vcr_all", m["vcr"]),
+        "energy_used_grid": round(1.0 - m["battery_left"], 4),
+        "grid_steps": m["steps"],
+        # What `pirl fly` needs to fly the files back in the same world.
+        "env": cfg.to_dict(),
+        "mission": settings.to_dict(),
+    }
+    (folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary
 
 
+def write_mission(
+    out: Path,
+    cfg: VCPPConfig,
+    settings: MissionSettings,
+    policy: Any,
+    seed: int,
+    what: str,
+    gimbal: str = "v2",
+) -> dict[str, Any]:
+    """Record the episode, write every file into the new folder ``out`` (atomically; refused
+    if it exists) and return the summary."""
+    out = Path(out)
+    check_new_folder(out, gimbal)
+    plan = plan_episode(record_episode(cfg, policy, seed), cfg, settings)
+    with staged(out) as tmp:
+        return write_files(tmp, plan, cfg, settings, what, seed, gimbal, out.name)
+
+
 __all__ = [
+    "Planned",
+    "check_new_folder",
     "file_digest",
+    "plan_episode",
+    "staged",
+    "write_files",
     "geo_for",
     "mission_items",
     "mission_source",

@@ -25,7 +25,7 @@ FIGURE_UAVS = (1, 2, 4)
 
 def single(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The rows (or episodes) of one UAV: what the paper's tables compare."""
-    return [r for r in rows if int(r.get("uavs", 1)) == 1]
+    return [r for r in rows if int(r.get("uavs") or 1) <= 1]
 
 
 def fleet_table(rows: list[dict[str, Any]], names: Mapping[str, str]) -> Table | None:

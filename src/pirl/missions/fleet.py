@@ -1,0 +1,167 @@
+"""``pirl plan --uavs K``: one fleet episode written as K missions that never meet.
+
+The fleet's episode (wind off) is played as :func:`pirl.evaluate.fleet.run_fleet_episode`
+plays it; each UAV's steps become its own mission folder ``uav-1/``, ``uav-2/``, ... (the
+files and ``summary.json`` of a single mission, :mod:`pirl.missions.write`, with home at
+that UAV's start cell), and ``fleet.json`` says what the fleet does together: its coverage,
+makespan, each UAV's take-off delay per wave and the closest approach
+(:mod:`pirl.missions.separation`). The whole folder is staged and renamed into place at once.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+
+from pirl.config.mission import MissionSettings
+from pirl.config.world import VCPPConfig
+from pirl.env.core import EnvCore
+from pirl.evaluate.fleet import Team, fleet_row
+from pirl.missions.items import Episode, Step
+from pirl.missions.separation import Separation, separate, track
+from pirl.missions.write import Planned, check_new_folder, plan_episode, staged, write_files
+
+FLEET_FILE = "fleet.json"
+
+
+def uav_folder(u: int) -> str:
+    """The folder of UAV ``u`` (0-based) in a fleet's missions: ``uav-1``, ``uav-2``, ..."""
+    return f"uav-{u + 1}"
+
+
+def record_fleet(cfg: VCPPConfig, team: Team, seed: int) -> tuple[list[Episode], dict[str, Any]]:
+    """Play ``team`` on scenario ``seed`` of ``cfg`` (``cfg.uavs`` UAVs) with wind off,
+    recording each UAV's steps until it leaves; returns the episodes and the fleet's row."""
+    core = EnvCore(cfg.replace(wind_prob=0.0), 1)
+    core.reset_world(0, seeding.np_random(seed)[0])
+    world, k = core.world, cfg.uavs
+    team.reset(world, 0, seed)
+    starts = [world.position(u) for u in range(k)]
+    cameras = [world.camera_setting(u) for u in range(k)]
+    firsts = [world.footprint(u) for u in range(k)]
+    steps: list[list[Step]] = [[] for _ in range(k)]
+    infos = core.infos()
+    coverage = [_coverage(world)]
+    while True:
+        active = ~world.left[:k].astype(bool)
+        core.step(team.act(core.obs, infos, active))
+        infos = core.infos()
+        coverage.append(_coverage(world))
+        for u in np.flatnonzero(active):
+            captured = int(world.flags[u]["new_cells"]) > 0
+            view = world.footprint(u) if captured else np.zeros((0, 2), dtype=np.int64)
+            steps[u].append(Step(world.position(u), world.camera_setting(u), captured, view))
+        if len(core.worlds_over()):
+            break
+    row = fleet_row(world, 0, coverage)
+    episodes = [
+        Episode(
+            starts[u],
+            cameras[u],
+            firsts[u],
+            steps[u],
+            {**row, "battery_left": world.battery(u), "steps": int(world.status[u]["steps"])},
+        )  # fmt: skip
+        for u in range(k)
+    ]
+    return episodes, row
+
+
+def _coverage(world: Any) -> float:
+    st = world.status[0]
+    return float(st["covered"]) / max(1, int(st["coverable"]))
+
+
+def fleet_separation(plans: list[Planned], s: MissionSettings) -> Separation:
+    """The separation check of the fleet's sorties (:func:`pirl.missions.separation.separate`)."""
+    tracks = [
+        [
+            track(
+                [(i.kind, i.cell) for i in sortie.items],
+                p.ep.start[:2],
+                p.geo.georef.cell_size_m,
+                p.geo.level_m,
+                s,
+            )  # fmt: skip
+            for sortie in p.parts
+        ]
+        for p in plans
+    ]
+    return separate(tracks, s)
+
+
+def write_fleet_missions(
+    out: Path,
+    cfg: VCPPConfig,
+    settings: MissionSettings,
+    team: Team,
+    seed: int,
+    what: str,
+    gimbal: str = "v2",
+) -> dict[str, Any]:
+    """Record the fleet's episode, check its separation and write ``uav-N/`` per UAV and
+    ``fleet.json`` into the new folder ``out`` (atomically; refused if it exists, or in one
+    line when a plan cannot keep its separation); returns the fleet's summary."""
+    out = Path(out)
+    check_new_folder(out, gimbal)
+    episodes, row = record_fleet(cfg, team, seed)
+    plans = [plan_episode(ep, cfg, settings) for ep in episodes]
+    apart = fleet_separation(plans, settings)
+    with staged(out) as tmp:
+        uavs = []
+        for u, plan in enumerate(plans):
+            name = uav_folder(u)
+            summary = write_files(tmp / name, plan, cfg, settings, what, seed, gimbal, name)
+            summary["takeoff_delay_s"] = apart.delays_s[u][: len(plan.parts)]
+            (tmp / name / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+            uavs.append({
+                "folder": name, "home": summary["home"], "sorties": summary["sorties"],
+                "flight_time_s": summary["flight_time_s"], "distance_m": summary["distance_m"],
+                "photos": summary["photos"], "credited_cells": row["credit"][u],
+                "takeoff_delay_s": summary["takeoff_delay_s"],
+            })  # fmt: skip
+        fleet = {
+            "method": what,
+            "seed": seed,
+            "uavs": cfg.uavs,
+            "site": cfg.site or None,
+            "size": list(cfg.size),
+            "vcr": row["vcr"],
+            "makespan_95": row["makespan_95"],
+            "makespan_99": row["makespan_99"],
+            "grid_steps": row["steps"],
+            "uav_overlap": row["uav_overlap"],
+            "near_misses": row["near_misses"],
+            "collisions": row["collisions"],
+            "separation_m": settings.separation_m,
+            "separation": apart.to_dict(),
+            "flight_time_s": _fleet_seconds(plans, apart),
+            "members": uavs,
+            "env": cfg.to_dict(),
+            "mission": settings.to_dict(),
+        }
+        (tmp / FLEET_FILE).write_text(json.dumps(fleet, indent=1) + "\n")
+    return fleet
+
+
+def _fleet_seconds(plans: list[Planned], apart: Separation) -> float:
+    """The fleet's flight time: wave by wave, the latest landing (delay + sortie)."""
+    waves = max(len(p.parts) for p in plans)
+    return round(
+        sum(
+            max(
+                apart.delays_s[u][n] + p.parts[n].seconds
+                for u, p in enumerate(plans)
+                if n < len(p.parts)
+            )
+            for n in range(waves)
+        ),
+        1,
+    )
+
+
+__all__ = ["FLEET_FILE", "fleet_separation", "record_fleet", "uav_folder", "write_fleet_missions"]
