@@ -23,6 +23,11 @@ same run (interleaved, best of two) and states the memory of one world of each.
 ``--baseline-settings JSON`` measures the same batched rows with other env settings, as a
 ratio (e.g. an observation option on against off).
 
+``--uavs 1,4,8`` measures fleets (docs/fleets.md): UAV-steps per second of the SB3 fleet
+VecEnv (``make_fleet_vec_env``, a slot per UAV) and of the batched core with K UAVs per
+world, on ``--size`` and on ``--site`` when given, with about ``--envs`` UAVs in all (``envs
+// K`` worlds), interleaved and best of two, as a ratio of K = 1 measured in the same run.
+
 Usage: ``python benchmarks/env_throughput.py [--seconds 2] [--envs 64] [--size 60x60x3]
 [--footprint paper] [--threads] [--against REV] [--settings JSON] [--baseline-settings
 JSON]``.
@@ -178,6 +183,50 @@ def compare_site(site: str, settings: dict, envs: int, seconds: float) -> None:
           f"{world_bytes(base_cfg) / 2**20:.2f} MiB at {size}")  # fmt: skip
 
 
+def fleet_rates(cfg: VCPPConfig, uavs: int, envs: int, seconds: float) -> dict[str, float]:
+    """UAV-steps/s of the fleet VecEnv and of the core with ``uavs`` UAVs per world, about
+    ``envs`` UAVs in all."""
+    from pirl.env.fleet import make_fleet_vec_env
+
+    fleet = cfg.replace(uavs=uavs)
+    worlds = max(1, envs // uavs)
+    slots = worlds * uavs
+    vec = make_fleet_vec_env(worlds, 0, fleet)
+    vec.reset()
+    core = EnvCore(fleet, worlds)
+    for e in range(worlds):
+        core.reset_world(e, np.random.default_rng(e))
+
+    def vec_step(actions: np.ndarray) -> None:
+        vec.step_async(actions)
+        vec.step_wait()
+
+    return {
+        "FleetVecEnv (SB3)": batched_rate(vec_step, slots, seconds),
+        "EnvCore": batched_rate(core.step, slots, seconds),
+    }
+
+
+def compare_fleets(cfgs: dict[str, VCPPConfig], uavs: list[int], envs: int, seconds: float) -> None:
+    """UAV-steps/s at each K on each world, interleaved, best of two; ratios to K = 1."""
+    best: dict[tuple[str, int], dict[str, float]] = {}
+    for _ in range(2):
+        for name, cfg in cfgs.items():
+            for k in uavs:
+                for key, value in fleet_rates(cfg, k, envs, seconds).items():
+                    row = best.setdefault((name, k), {})
+                    row[key] = max(row.get(key, 0.0), value)
+    print(f"\nfleets (about {envs} UAVs in all): UAV-steps/s, and as a ratio of K = 1")
+    for name in cfgs:
+        for k in uavs:
+            cells = []
+            for key, value in best[(name, k)].items():
+                one = best.get((name, 1), {}).get(key)
+                ratio = f" ({value / one:.2f}x)" if one else ""
+                cells.append(f"{key} {value:>10,.0f}{ratio}")
+            print(f"{name:<14} K={k:<3} " + "   ".join(cells))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="timing per row")
@@ -188,6 +237,7 @@ def main() -> None:
     parser.add_argument("--against", metavar="REV", help="also measure git revision REV")
     parser.add_argument("--settings", default="{}", help="JSON of extra env settings")
     parser.add_argument("--site", help="also measure on this site folder, against --size")
+    parser.add_argument("--uavs", help="fleet sizes to measure, e.g. 1,4,8 (alone: only them)")
     parser.add_argument("--baseline-settings", metavar="JSON",
                         help="also measure the batched rows with these extra env settings "
                              "instead, and print --settings' rate as a ratio of them")  # fmt: skip
@@ -199,6 +249,15 @@ def main() -> None:
     settings = {"size": list(size), "footprint": args.footprint, **extra}
     cfg = VCPPConfig(size=size, footprint=args.footprint, **extra)
     n = args.envs
+    if args.uavs:
+        cfgs = {args.size: cfg}
+        if args.site:
+            from pirl.world.seeable import with_site
+
+            cfgs[os.path.basename(args.site.rstrip("/"))] = with_site(cfg, args.site)
+        ks = sorted({1, *(int(v) for v in args.uavs.split(","))})
+        compare_fleets(cfgs, ks, n, args.seconds)
+        return
 
     rows: list[tuple[str, float]] = [("naive (numba off)", naive_rate(settings, args.seconds))]
     rows.append(("single VCPPEnv", single_rate(settings, args.seconds)))
