@@ -3,6 +3,8 @@ teammates block, and the two APIs (PettingZoo's ParallelEnv, the SB3 VecEnv of s
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test
@@ -204,3 +206,39 @@ def test_report_has_a_fleets_table_and_figure_and_keeps_fleets_out_of_the_paper_
     assert (tmp_path / "report" / "fleet_coverage.png").stat().st_size > 0
     camera = table.split("### Camera use")[1].split("###")[0]
     assert len([line for line in camera.splitlines() if line.startswith("| ")]) == 2  # head, K=1
+
+
+def test_a_ppo_method_trains_on_mixed_fleet_sizes_and_flies_any_of_them(tmp_path):
+    """train.uavs [1, 2]: worlds of one and of two UAVs side by side under one masked policy
+    (MixedFleetVecEnv); the episode log has only flown episodes (not a parked UAV's steps);
+    the run is then evaluated at K = 1 and 3, a size it never saw."""
+    from pathlib import Path
+
+    from pirl.agents.train import train
+    from pirl.config.run import RunConfig
+    from pirl.evaluate.runner import EvalPlan, evaluate, spec_for_run
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = RunConfig.from_yaml(root / "configs" / "test.yaml").with_overrides(
+        train={"total_steps": 1024, "uavs": [1, 2]}
+    )
+    run = tmp_path / "run"
+    train("ppo-ewri", cfg, run, seed=0, show_progress=False)
+    rows = [line.split(",") for line in (run / "episodes.csv").read_text().splitlines()[1:]]
+    slot_episodes = [(r[1], r[6], r[2]) for r in rows]  # world (slot), steps, vcr
+    assert rows and len(set(slot_episodes)) == len(slot_episodes)  # a parked UAV logs nothing
+    plan = EvalPlan([spec_for_run(run)], [(12, 12, 3)], 2, env=cfg.env, config=cfg, uavs=[1, 3])
+    evaluate(plan, tmp_path / "eval")
+    rows = [json.loads(line) for line in (tmp_path / "eval" / "episodes.jsonl").open()]
+    assert sorted({r["uavs"] for r in rows}) == [1, 3] and all(r["collisions"] == 0 for r in rows)
+
+
+def test_pirl_refuses_fleet_training_in_one_line():
+    from pirl.agents.train import build_env_stack
+    from pirl.config.run import RunConfig
+
+    cfg = RunConfig().with_overrides(train={"uavs": [1, 2]})
+    with pytest.raises(ConfigError, match=r"train.uavs=\[1, 2\]: PIRL's advice"):
+        build_env_stack(cfg, 0, advice=object())
+    with pytest.raises(ConfigError, match="train.uavs"):
+        RunConfig().with_overrides(train={"uavs": [0]})

@@ -160,6 +160,18 @@ class EnvStack:
 def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str = "") -> EnvStack:
     """make_vec_env on the resolved config's training env -> (PARE when there is ``advice``,
     a :class:`~pirl.pare.bundle.AdviceBundle`) -> VecMonitor."""
+    if cfg.train.uavs != (1,):
+        from pirl.env.fleet import MixedFleetVecEnv
+
+        if advice is not None:
+            raise ConfigError(
+                f"train.uavs={list(cfg.train.uavs)}: PIRL's advice is asked about one UAV; "
+                "train it with train.uavs [1] and fly it in a fleet with pirl evaluate --uavs"
+            )
+        venv = MixedFleetVecEnv(
+            cfg.ppo.n_envs, training_env(cfg), cfg.train.uavs, seed=train_seed_base(seed)
+        )
+        return EnvStack(VecMonitor(venv), venv, None)
     venv = make_vec_env(cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env(cfg))
     pare = None
     inner = venv
@@ -267,6 +279,8 @@ class RunCallback(BaseCallback):
         self._terms_n += snap.terms.shape[0]
         dones, infos = self.locals["dones"], self.locals["infos"]
         for e in np.flatnonzero(dones):
+            if not infos[e].get("fleet_active", True):
+                continue  # a fleet's UAV parked since it left: its episode was logged then
             m = infos[e]["episode_metrics"]
             self._csv.writerow([self.num_timesteps, int(e)] + [m[c] for c in EPISODE_COLUMNS[2:]])
             self.csv_rows += 1

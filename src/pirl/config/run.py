@@ -99,6 +99,10 @@ class TrainSettings(Settings, section="train"):
     """``env.stall_guard`` while training, in place of the env's (evaluation keeps the env's);
     None: the env's. 0 trains without the guard a policy that is evaluated with it, which is
     what validation chose for ``quick`` (docs/results.md, "The stall guard")."""
+    uavs: tuple[int, ...] = (1,)
+    """Fleet sizes trained on together (docs/fleets.md): ``[1]`` one UAV per world; ``[1, 2,
+    4]`` worlds of 1, 2 and 4 UAVs side by side, one policy shared by every UAV. A PPO
+    method's own; PIRL's advice is asked about one UAV, so it trains on ``[1]``."""
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
@@ -119,6 +123,8 @@ class TrainSettings(Settings, section="train"):
         for name, steps in self.steps_by_method.items():
             if steps <= 0:
                 raise self.refuse("steps_by_method", f"{name}: must be > 0")
+        if not self.uavs or any(not isinstance(k, int) or k < 1 for k in self.uavs):
+            raise self.refuse("uavs", "write fleet sizes >= 1, e.g. [1, 2, 4]")
 
 
 @dataclass(frozen=True)

@@ -191,7 +191,8 @@ class EnvCore:
         ended = kernel(w.arrays, w.params, self.layout, self.arrays, actions)
         if ended < 0:
             raise ValueError(f"actions must be integers in [0, {D.N_ACTIONS}); got {actions}")
-        self.ended = ended
+        # A fleet's UAV may leave (its slot done) while its world goes on: read the flags.
+        self.ended = ended if self.uavs == 1 else -1
         return ended
 
     def state_dict(self) -> dict[str, Any]:

@@ -312,9 +312,102 @@ def make_fleet_vec_env(
     return venv
 
 
+class MixedFleetVecEnv(VecEnv):
+    """Fleets of several sizes side by side as one ``VecEnv``: a :class:`FleetVecEnv` per
+    fleet size K, their slots one after the other (``sizes[0]``'s first), so one masked
+    policy learns from fleets of every size at once. Each K gets about the same number of
+    UAV slots: ``max(1, round(worlds / (len(sizes) * K)))`` worlds of K UAVs."""
+
+    def __init__(
+        self, worlds: int, config: VCPPConfig, sizes: Sequence[int], seed: int | None = 0
+    ) -> None:
+        self.parts = [
+            make_fleet_vec_env(
+                max(1, round(worlds / (len(sizes) * k))),
+                None if seed is None else seed + 1_000 * i,
+                config.replace(uavs=k),
+            )
+            for i, k in enumerate(sizes)
+        ]
+        self.sizes = list(sizes)
+        self._edges = np.cumsum([0] + [p.num_envs for p in self.parts])
+        first = self.parts[0]
+        self.render_mode = "rgb_array"
+        super().__init__(int(self._edges[-1]), first.observation_space, first.action_space)
+        self.step_snapshot: Any = None
+
+    def _split(self, values: np.ndarray) -> list[np.ndarray]:
+        return [values[a:b] for a, b in zip(self._edges[:-1], self._edges[1:], strict=True)]
+
+    def reset(self) -> np.ndarray:
+        obs = np.concatenate([p.reset() for p in self.parts])
+        self.reset_infos = [i for p in self.parts for i in p.reset_infos]
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        for part, chunk in zip(self.parts, self._split(np.asarray(actions)), strict=True):
+            part.step_async(chunk)
+
+    def step_wait(self):
+        results = [p.step_wait() for p in self.parts]
+        self.step_snapshot = _Terms(np.concatenate([p.step_snapshot.terms for p in self.parts]))
+        obs, rewards, dones = (np.concatenate([r[i] for r in results]) for i in range(3))
+        return obs, rewards, dones, [i for r in results for i in r[3]]
+
+    def action_masks(self) -> np.ndarray:
+        return np.concatenate([p.action_masks() for p in self.parts])
+
+    def seed(self, seed: int | None = None) -> Sequence[None | int]:
+        return [
+            s
+            for i, p in enumerate(self.parts)
+            for s in p.seed(None if seed is None else seed + 1_000 * i)
+        ]
+
+    def state_dict(self) -> dict[str, Any]:
+        """Every part's :meth:`FleetVecEnv.state_dict`, enough to continue exactly."""
+        return {"parts": [p.state_dict() for p in self.parts]}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for part, saved in zip(self.parts, state["parts"], strict=True):
+            part.load_state_dict(saved)
+
+    def close(self) -> None:
+        return None
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self, attr_name) for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        slots = list(self._get_indices(indices))
+        if method_name == "action_masks":
+            return list(self.action_masks()[slots])
+        method = getattr(self, method_name)
+        return [method(*method_args, **method_kwargs) for _ in slots]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [image for p in self.parts for image in p.get_images()]
+
+
+class _Terms:
+    """The reward terms of a step (what training logs), the parts' one after the other."""
+
+    def __init__(self, terms: np.ndarray) -> None:
+        self.terms = terms
+
+
 __all__ = [
     "FleetParallelEnv",
     "FleetVecEnv",
+    "MixedFleetVecEnv",
     "agent_name",
     "make_fleet_vec_env",
     "parallel_env",
