@@ -11,8 +11,9 @@ positions; from one launch site its parts degenerate into thin slices or rings).
    part connected by construction (every cell on a shortest way from a seed to a cell of its
    part belongs to the part too, up to ties), where DARP's multiplicative weights need a
    repair step;
-3. each seed moves to the cell of its part nearest the part's centre and 2 repeats (Lloyd's
-   iteration), so parts are compact, as a lawnmower sweep wants;
+3. each seed moves to the cell of its part nearest the part's centre, and 2 repeats
+   (:data:`LLOYD_ROUNDS` rounds of Lloyd's iteration), so parts are compact, as a lawnmower
+   sweep wants;
 4. parts go to UAVs by distance from their starts (greedy, nearest pair first).
 
 Ground cells under an obstacle at the flight altitude belong to the part of the nearest free
