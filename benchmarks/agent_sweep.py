@@ -9,9 +9,11 @@ VCR IQM over training seeds [stratified bootstrap 95% interval], the worst seed,
 relative to the planner, camera share, and the episodes that ended in a loop (their last 60
 steps visit fewer than 10 cells). ``--split validation`` (the default) plays validation
 scenarios, which no evaluation uses: settings are chosen there. ``--split evaluation`` plays the
-evaluation scenarios of ``pirl reproduce`` (the ablation reported in docs/results.md).
+evaluation scenarios of ``pirl reproduce`` (the ablation in
+docs/experiments/2026-11-30-agents-masks-memory.md).
 
-Usage (docs/results.md gives the commands that produced its tables)::
+Usage (docs/results.md and the notes in docs/experiments/ give the commands that produced their
+tables)::
 
     python benchmarks/agent_sweep.py --variants unmasked masked masked-memory \
         --seeds 0 1 --sizes 30 45 60 --episodes 6 --out results/agent-sweep
@@ -42,7 +44,8 @@ PAPER_OBS = {"obs_visits": False, "obs_target": False}
 MEMORY = {"obs_visits": True, "obs_target": True}
 PATH = {**MEMORY, "obs_target_path": True}
 FIXED = {"camera_start": "fixed"}  # training starts at the paper's camera pose
-# PIRL trained as long as PPO-EWRI (quick's budgets since "PIRL's budget", docs/results.md).
+# PIRL trained as long as PPO-EWRI (quick's budgets since "PIRL's budget",
+# docs/experiments/2026-12-03-stall-scalar-and-pirl-budget.md).
 PIRL409 = {"ppo-ewri": 409600, "pirl": 409600}
 
 
@@ -92,7 +95,8 @@ VARIANTS: dict[str, dict[str, dict]] = {
         ppo={"n_epochs": 3, "n_envs": 32, "n_steps": 128}, train=budget(409600)
     ),
     # The target block by the way round obstacles (breadth-first), not the straight line, which
-    # trapped greedy policies in front of walls on 60x60x3 (docs/results.md).
+    # trapped greedy policies in front of walls on 60x60x3
+    # (docs/experiments/2026-11-30-way-round-obstacles.md).
     "masked-memory-path": overrides(
         env={**MEMORY, "obs_target_path": True}, train={"obstacles": []}
     ),
@@ -102,8 +106,9 @@ VARIANTS: dict[str, dict[str, dict]] = {
     ),
     # Train on a world 4 times the paper's 15x15x3 (episodes of 364 steps, not 91).
     "masked-memory-train30": overrides(env={**MEMORY, "size": [30, 30, 3]}),
-    # Greedy loops on clutter and sites (docs/results.md): training worlds twice as dense as
-    # the evaluation's (4-10 spheres on 15x15x3), or visit counts that saturate at 8, not 3.
+    # Greedy loops on clutter and sites (docs/experiments/2026-12-02-greedy-loops-clutter-sites.md):
+    # training worlds twice as dense as the evaluation's (4-10 spheres on 15x15x3), or visit
+    # counts that saturate at 8, not 3.
     "masked-memory-path-dense": overrides(env=PATH, train={"obstacles": [4, 10]}),
     "masked-memory-path-visits8": overrides(env={**PATH, "obs_visits_cap": 8}),
     # ... or half the training episodes start with the work left in one box out of sight.
@@ -119,7 +124,8 @@ VARIANTS: dict[str, dict[str, dict]] = {
         env={**PATH, "obs_stall": True}, train={"obstacles": [4, 10]}
     ),
     # ... or PIRL trained as long as PPO-EWRI (409,600 steps: the budget at which every
-    # greedy-sampled gap on 30/45/60 closed, "The budget" in docs/results.md).
+    # greedy-sampled gap on 30/45/60 closed, "The budget" in
+    # docs/experiments/2026-11-30-budgets.md).
     "masked-memory-path-pirl409": overrides(env=PATH, train={"steps_by_method": PIRL409}),
     "masked-memory-path-pirl409-stall": overrides(
         env={**PATH, "obs_stall": True},

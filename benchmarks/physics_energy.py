@@ -31,7 +31,7 @@ from pirl.physics import Mission
 from pirl.physics.flight import MOVE, normalized_power
 from pirl.physics.pyflyt_backend import PyFlytFlight
 from pirl.world import dynamics as D
-from pirl.world.state import Scenario
+from pirl.world.scenario import Scenario
 
 UNCAPPED = 1e6  # max_thrust_to_weight that never caps: the energy model before the cap
 

@@ -18,7 +18,7 @@ import torch
 
 import pirl  # noqa: F401  (registers pirl/VCPP-v0)
 from pirl._paths import cache_root
-from pirl.world.state import Scenario
+from pirl.world.scenario import Scenario
 
 # Compiled kernels are shared by every test process and the `pirl` subprocesses tests start.
 # Those subprocesses get a cache folder of their own (PIRL_CACHE_DIR, to test the advice

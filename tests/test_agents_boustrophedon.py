@@ -8,7 +8,7 @@ import pytest
 from pirl.agents import BoustrophedonPolicy, RandomPolicy
 from pirl.env import VCPPEnv
 from pirl.evaluate import run_episode
-from pirl.world.state import Scenario
+from pirl.world.scenario import Scenario
 
 EMPTY = np.zeros((0, 4))
 

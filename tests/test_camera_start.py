@@ -12,7 +12,7 @@ from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
-from pirl.world.state import draw_scenario
+from pirl.world.scenario import draw_scenario
 
 TEST_CFG = Path(__file__).resolve().parents[1] / "configs" / "test.yaml"
 

@@ -9,7 +9,7 @@ from conftest import scenario
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
 from pirl.world.metrics import episode_metrics
-from pirl.world.state import blocked_grid, draw_scenario
+from pirl.world.scenario import blocked_grid, draw_scenario
 
 MOVE_DELTAS = {
     0: (1, 0, 0),

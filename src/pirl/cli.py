@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
@@ -18,14 +18,12 @@ from pirl.terminal import (
     ConfigOpt,
     RayOpt,
     SizeOpt,
-    StopWorkersOnCtrlC,
     clean_errors,
     command_line,
     console,
     count_progress,
     env_settings,
-    episode_progress,
-    err,
+    episode_bar,
     fly_and_print,
     interrupted,
     list_option,
@@ -33,10 +31,12 @@ from pirl.terminal import (
     metrics_table,
     or_list,
     print_advice_check,
+    print_distilled,
     print_fleet_summary,
     print_plan_summary,
     print_score,
-    print_site_report,
+    print_site_check,
+    show_prompt,
     summary_table,
     training_ended,
     uavs_option,
@@ -68,11 +68,7 @@ def render(
 
     check_seed(seed)
     check_gif_target(out, fps)
-    cfg = env_settings(config, size, footprint)
-    if site is not None:
-        from pirl.world.seeable import with_site
-
-        cfg = with_site(cfg, str(site))
+    cfg = env_settings(config, size, footprint, site)
     result, path = record_gif(cfg, make_policy(policy, seed), seed, out, fps)
     console.print(metrics_table([(policy, result.metrics)], f"{cfg.size} seed {seed}"))
     console.print(f"wrote {path} ({len(result.frames)} frames)")
@@ -104,23 +100,17 @@ def reproduce(
     ray_address: RayOpt = None,
 ) -> None:
     """Train every method not yet trained in --out, evaluate all of them, write the report."""
-    from rich.progress import Progress
-
     from pirl.agents.stops import TrainingInterrupted
     from pirl.reproduce.pipeline import reproduce as run
+    from pirl.reproduce.pipeline import reproduce_settings
 
-    path = preset_path(config, "--config") if config else preset_path(profile, "--profile")
-    cfg = load_preset(path)
-    if seeds:
-        cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
-    out = out or Path("results") / profile
-    advisor = advisor or cfg.pare.advisor
+    path, cfg, out, advisor = reproduce_settings(profile, config, seeds, out, advisor)
     console.print(f"reproduce: profile {path}, advisor {advisor}, output {out}")
     try:
-        with StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
+        with episode_bar("evaluation") as progress:
             report = run(
-                cfg, out, advisor, workers, log=lambda m: console.print(m),
-                progress=episode_progress(bar, "evaluation"), ray_address=ray_address,
+                cfg, out, advisor, workers, log=lambda m: console.print(m), progress=progress,
+                ray_address=ray_address,
             )  # fmt: skip
     except (KeyboardInterrupt, TrainingInterrupted):
         raise interrupted(
@@ -208,8 +198,6 @@ def distill(
     fit_steps: Annotated[int, typer.Option(help="Adam steps of the student's fit.")] = 2000,
 ) -> None:
     """Distil a teacher advisor into a student offline (for pirl train --student)."""
-
-    from pirl.advice.student import STUDENT_FILE
     from pirl.agents.distill import distill as run_distill
 
     cfg = load_preset(config)
@@ -219,12 +207,7 @@ def distill(
         record = run_distill(
             cfg, teacher, states, out, sources, seed=seed, fit_steps=fit_steps, progress=progress,
         )  # fmt: skip
-    console.print(
-        f"{record['label']}: agreement {record['agreement']:.3f} (majority "
-        f"{record['majority']:.3f}) on {record['heldout']} held-out answers; "
-        f"{record['dataset_size']} answers in the dataset"
-    )
-    console.print(f"wrote {out / STUDENT_FILE}; train with --student {out}")
+    print_distilled(record, out)
 
 
 @app.command()
@@ -290,18 +273,16 @@ def evaluate(
     ] = None,
 ) -> None:
     """Evaluate trained runs and built-in methods on the same scenarios of each size."""
-    from rich.progress import Progress
-
     from pirl.evaluate.runner import evaluate_runs
 
     try:
-        with StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
+        with episode_bar("episodes") as progress:
             summary = evaluate_runs(
                 out, list(runs or []), methods or [],
                 sizes if sizes is not None else ([] if site else ["30", "45", "60"]),
                 episodes, sim or ["grid"],
                 workers, preset_path(config) if config is not None else None, advisor,
-                act, overwrite, progress=episode_progress(bar, "episodes"),
+                act, overwrite, progress=progress,
                 ray_address=ray_address, sites=list(site or []), uavs=uavs or [1],
             )  # fmt: skip
     except KeyboardInterrupt:
@@ -346,32 +327,13 @@ def advise(
 ) -> None:
     """Ask the advisor about one scenario's first state: the check to run first on a new LLM.
     With --score N: how good its advice is, scored against the oracle, and what a run costs."""
-    from pirl.advice.health import check_advisor
-    from pirl.config.run import RunConfig
+    from pirl.advice.health import advise_settings, check_advisor
 
     check_seed(seed)
-    kind = advisor_kind(advisor)
-    if config:
-        cfg = load_preset(config)
-    else:  # no config: the prompt this advisor suits (the embedded model: compact)
-        cfg = RunConfig().with_overrides(pare={"prompt_variant": kind.prompt_variant})
-    if base_url is None:
-        kind.check_key(cfg)
-    changes: dict[str, Any] = {}
-    if model is not None and kind.model_setting:
-        changes[kind.model_setting] = model
-    if base_url is not None:
-        changes["openai_base_url"] = base_url
-    if changes:
-        cfg = cfg.with_overrides(advisor=changes)
+    cfg = advise_settings(config, advisor, model, base_url)
     if score is not None:
         print_score(cfg, advisor, score, out, price_in, price_out, profile, cache, seed)
         return
-
-    def show_prompt(prompt: str) -> None:
-        console.rule("prompt")
-        console.print(prompt, markup=False, highlight=False)
-
     check = check_advisor(
         cfg, advisor, tuple(size), seed, cache, show_prompt, log=lambda m: console.print(m)
     )
@@ -422,28 +384,19 @@ def plan(
 ) -> None:
     """Write one episode as missions a drone can fly (QGroundControl .plan, QGC WPL 110,
     GeoJSON, KML), split into battery-sized sorties (docs/missions.md)."""
-    from pirl.missions.write import mission_source, write_mission
+    from pirl.missions.fleet import plan_missions
 
     check_seed(seed)
     if fly not in (None, Sim.PHYSICS):
         raise ConfigError(f"--fly {fly!r}: allowed value is physics")
     cfg = load_preset(config)
-    env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
+    what, summary = plan_missions(
+        out, cfg, seed, policy, method, act, site, size, gimbal, uavs, bool(fly)
+    )
     if uavs != 1:
-        from pirl.evaluate.fleet import team_for
-        from pirl.missions.fleet import write_fleet_missions
-
-        if fly:
-            raise ConfigError("--fly: a fleet's folders fly one by one (pirl fly OUT/uav-1)")
-        fleet = env.replace(uavs=uavs)
-        summary = write_fleet_missions(
-            out, fleet, cfg.mission, team_for(chosen), seed, what, gimbal
-        )
         print_fleet_summary(out, summary)
         return
-    summary = write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
-    print_plan_summary(what, summary, cfg.mission.speed_m_s)
-    console.print(f"wrote {out}: {', '.join(summary['files'])}")
+    print_plan_summary(out, what, summary, cfg.mission.speed_m_s)
     if fly:
         fly_and_print(out, cfg.physics)
 
@@ -462,7 +415,6 @@ def fly(
 ) -> None:
     """Fly a written mission in PyFlyt: its .plan files read back from disk, every sortie in
     order; flown coverage and energy beside the grid episode's, in flown.json."""
-
     cfg = load_preset(config)
     fly_and_print(mission, cfg.physics, wind)
 
@@ -487,21 +439,10 @@ def site_check(
     """Load and check a site: its size, coverable cells and every reason a cell cannot be seen.
 
     Exits 0 when at least one coverable cell can be seen, 1 otherwise."""
-    import json
-
-    from pirl.missions import site_check as sc
+    from pirl.missions.site_check import site_report
 
     env = load_preset(config).env if config else None
-    found, seen, report = sc.check_site(site, env)
-    if picture is not None:
-        report["picture"] = str(sc.picture(found, seen, picture))
-    if as_json:
-        print(json.dumps(report, sort_keys=True))
-    else:
-        print_site_report(report, sc.REASON_TEXT)
-    if not report["usable"]:
-        if not as_json:
-            err.print("[bold red]error:[/] no coverable cell can be seen: the site is unusable")
+    if not print_site_check(site_report(site, env, picture), as_json):
         raise typer.Exit(1)
 
 
@@ -549,15 +490,10 @@ def webots_world(
     ] = True,
 ) -> None:
     """Write a Webots world of one scenario (Mavic 2 Pro, zoom camera, sphere obstacles)."""
-    from pirl.config.physics import PhysicsConfig
-    from pirl.physics.webots.world import write_world
+    from pirl.physics.webots.world import write_mavic_world
 
     cfg = env_settings(config, size, footprint)
-    physics = PhysicsConfig(cell_size_m=cell_size, level_height_m=cell_size, body_radius_m=0.25)
-    # The controller reads env settings alone (its own --config), so it gets the preset's env
-    # section as a file of its own, by absolute path (Webots runs it in its own folder).
-    env_file = out.with_name(f"{out.stem}.env.yaml").resolve() if config else None
-    written = write_world(out, cfg, seed, physics, policy, env_file, controller)
+    written = write_mavic_world(out, cfg, seed, policy, cell_size, bool(config), controller)
     for path in written:
         console.print(f"wrote {path}")
     console.print("open the world in Webots (R2023b or later); see docs/physics.md")

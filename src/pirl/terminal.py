@@ -189,11 +189,20 @@ ADVISORS = or_list(advisor_names())
 
 
 def env_settings(
-    config: str | None, size: tuple[int, int, int], footprint: str | None
+    config: str | None,
+    size: tuple[int, int, int],
+    footprint: str | None,
+    site: Path | None = None,
 ) -> VCPPConfig:
-    """``--config``'s env section with ``--size`` and, when given, ``--footprint`` applied."""
+    """``--config``'s env section with ``--size`` and, when given, ``--footprint`` and
+    ``--site`` applied."""
     env = load_preset(config).env.replace(size=tuple(size))
-    return env.replace(footprint=footprint) if footprint is not None else env
+    env = env.replace(footprint=footprint) if footprint is not None else env
+    if site is not None:
+        from pirl.world.seeable import with_site
+
+        env = with_site(env, str(site))
+    return env
 
 
 def make_policy(name: str, seed: int):
@@ -245,6 +254,16 @@ def episode_progress(bar: Any, label: str) -> Any:
         label, line="{label}: {done}/{total} episodes", bar=bar, tty=console.is_terminal,
         final_at_total=True, out=lambda text: console.print(text, highlight=False),
     )  # fmt: skip
+
+
+@contextlib.contextmanager
+def episode_bar(label: str) -> Iterator[Any]:
+    """:func:`episode_progress` on a bar of its own, with Ctrl-C stopping the worker
+    processes first (:class:`StopWorkersOnCtrlC`)."""
+    from rich.progress import Progress
+
+    with StopWorkersOnCtrlC(), Progress(console=console, transient=True) as bar:
+        yield episode_progress(bar, label)
 
 
 def summary_table(path: Path) -> Table:
@@ -372,6 +391,12 @@ def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
     )
 
 
+def show_prompt(prompt: str) -> None:
+    """``pirl advise``: the prompt under a rule, as written (no markup)."""
+    console.rule("prompt")
+    console.print(prompt, markup=False, highlight=False)
+
+
 def print_advice_check(check: Any, prompt_variant: str) -> bool:
     """``pirl advise``: the advisor's answer about one state and what it cost; whether it is
     advice (parsed, and not the prompt's own format example)."""
@@ -426,8 +451,25 @@ def print_site_report(report: dict[str, Any], reasons: dict[str, str]) -> None:
         console.print(f"wrote {report['picture']}")
 
 
-def print_plan_summary(what: str, summary: dict[str, Any], speed_m_s: float) -> None:
-    """``pirl plan``: the written mission in one line (coverage, sorties, distance, time)."""
+def print_site_check(report: dict[str, Any], as_json: bool) -> bool:
+    """``pirl site check``: the report as one JSON object or as lines; whether the site is
+    usable (an unusable one is an error line on stderr, unless the JSON says it)."""
+    import json
+
+    from pirl.missions.site_check import REASON_TEXT
+
+    if as_json:
+        print(json.dumps(report, sort_keys=True))
+    else:
+        print_site_report(report, REASON_TEXT)
+    if not report["usable"] and not as_json:
+        err.print("[bold red]error:[/] no coverable cell can be seen: the site is unusable")
+    return bool(report["usable"])
+
+
+def print_plan_summary(out: Path, what: str, summary: dict[str, Any], speed_m_s: float) -> None:
+    """``pirl plan``: the written mission in one line (coverage, sorties, distance, time),
+    then its files."""
     console.print(
         f"{what}: VCR {summary['vcr']:.3f} over seeable cells; {summary['sorties']} sortie(s), "
         f"items {summary['items_per_sortie']} ({summary['items_before_merging']} before "
@@ -435,6 +477,7 @@ def print_plan_summary(what: str, summary: dict[str, Any], speed_m_s: float) -> 
         f"at {speed_m_s:g} m/s, {summary['photos']} photos"
         + ("" if summary["real_place"] else "; NOT a real place (a generated world)")
     )
+    console.print(f"wrote {out}: {', '.join(summary['files'])}")
 
 
 def print_fleet_summary(out: Path, fleet: dict[str, Any]) -> None:
@@ -455,6 +498,18 @@ def print_fleet_summary(out: Path, fleet: dict[str, Any]) -> None:
     )
     folders = ", ".join(f"{m['folder']}/ ({m['sorties']} sortie(s))" for m in fleet["members"])
     console.print(f"wrote {out}: {folders}, fleet.json")
+
+
+def print_distilled(record: dict[str, Any], out: Path) -> None:
+    """``pirl distill``: the student's agreement with its teacher, and where it was written."""
+    from pirl.advice.student import STUDENT_FILE
+
+    console.print(
+        f"{record['label']}: agreement {record['agreement']:.3f} (majority "
+        f"{record['majority']:.3f}) on {record['heldout']} held-out answers; "
+        f"{record['dataset_size']} answers in the dataset"
+    )
+    console.print(f"wrote {out / STUDENT_FILE}; train with --student {out}")
 
 
 def training_ended(stop: Exception) -> typer.Exit:

@@ -15,9 +15,11 @@ from typing import Any
 from urllib.parse import urlparse
 
 from pirl.advice.base import Advisor, Answer
-from pirl.advice.registry import find_advisor_kind
+from pirl.advice.registry import advisor_kind, find_advisor_kind
 from pirl.advice.state import advice_requests
 from pirl.config.errors import UserError
+from pirl.config.presets import load_preset
+from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 
 
@@ -138,6 +140,27 @@ class AdviceCheck:
     """Seconds to build the advisor (loading a model, connecting)."""
 
 
+def advise_settings(
+    config: str | None, name: str, model: str | None = None, base_url: str | None = None
+) -> RunConfig:
+    """The settings ``pirl advise`` asks advisor ``name`` with: ``config``'s preset (none: the
+    prompt variant the advisor suits), its key checked unless ``base_url`` names a server, and
+    ``model`` and ``base_url`` applied."""
+    kind = advisor_kind(name)
+    if config:
+        cfg = load_preset(config)
+    else:  # no config: the prompt this advisor suits (the embedded model: compact)
+        cfg = RunConfig().with_overrides(pare={"prompt_variant": kind.prompt_variant})
+    if base_url is None:
+        kind.check_key(cfg)
+    changes: dict[str, Any] = {}
+    if model is not None and kind.model_setting:
+        changes[kind.model_setting] = model
+    if base_url is not None:
+        changes["openai_base_url"] = base_url
+    return cfg.with_overrides(advisor=changes) if changes else cfg
+
+
 def check_advisor(
     cfg: Any,
     name: str,
@@ -181,6 +204,7 @@ def check_advisor(
 
 __all__ = [
     "AdviceCheck",
+    "advise_settings",
     "advise_within",
     "backend_of",
     "check_advisor",

@@ -31,7 +31,7 @@ def check_layouts(env: VCPPConfig, sizes: Iterable[tuple[int, int, int]], worlds
     import numpy as np
 
     from pirl.world.memory import check_memory
-    from pirl.world.state import draw_scenario
+    from pirl.world.scenario import draw_scenario
 
     for size in sizes:
         check_memory(env.replace(size=tuple(size)), worlds)

@@ -23,7 +23,8 @@ from pirl.env.rewards import draw_weights
 from pirl.world import dynamics as D
 from pirl.world.dynamics import N_ACTIONS, step_one
 from pirl.world.metrics import episode_metrics
-from pirl.world.state import Scenario, WorldBatch
+from pirl.world.scenario import Scenario
+from pirl.world.state import WorldBatch
 
 
 class EnvArrays(NamedTuple):

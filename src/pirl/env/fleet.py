@@ -28,7 +28,8 @@ from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.env.shaping import ShapingHooks
 from pirl.world import dynamics as D
-from pirl.world.state import Scenario, WorldBatch
+from pirl.world.scenario import Scenario
+from pirl.world.state import WorldBatch
 
 
 def agent_name(uav: int) -> str:

@@ -16,7 +16,8 @@ from pirl.env.core import EnvCore, require_one_uav
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
 from pirl.world import dynamics as D
-from pirl.world.state import Scenario, WorldBatch
+from pirl.world.scenario import Scenario
+from pirl.world.state import WorldBatch
 
 
 class VCPPEnv(gym.Env):
@@ -86,7 +87,7 @@ class VCPPEnv(gym.Env):
     reward="static"|"ewri", wind_prob=0.1, ...)``: any field of
     :class:`pirl.config.world.VCPPConfig` as a keyword, or ``config=`` a VCPPConfig or a
     mapping; ``render_mode="rgb_array"`` for top-down pictures. ``reset(options={"scenario":
-    s})`` replays a given :class:`~pirl.world.state.Scenario`.
+    s})`` replays a given :class:`~pirl.world.scenario.Scenario`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 8}

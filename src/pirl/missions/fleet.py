@@ -17,13 +17,23 @@ from typing import Any
 import numpy as np
 from gymnasium.utils import seeding
 
+from pirl.config.errors import ConfigError
 from pirl.config.mission import MissionSettings
+from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
-from pirl.evaluate.fleet import Team, fleet_row
+from pirl.evaluate.fleet import Team, fleet_row, team_for
 from pirl.missions.items import Episode, Step
 from pirl.missions.separation import Separation, separate, track
-from pirl.missions.write import Planned, check_new_folder, plan_episode, staged, write_files
+from pirl.missions.write import (
+    Planned,
+    check_new_folder,
+    mission_source,
+    plan_episode,
+    staged,
+    write_files,
+    write_mission,
+)
 
 FLEET_FILE = "fleet.json"
 
@@ -164,4 +174,36 @@ def _fleet_seconds(plans: list[Planned], apart: Separation) -> float:
     )
 
 
-__all__ = ["FLEET_FILE", "fleet_separation", "record_fleet", "uav_folder", "write_fleet_missions"]
+def plan_missions(
+    out: Path,
+    cfg: RunConfig,
+    seed: int,
+    policy: Path | None = None,
+    method: str | None = None,
+    act: str = "greedy",
+    site: Path | None = None,
+    size: tuple[int, int, int] | None = None,
+    gimbal: str = "v2",
+    uavs: int = 1,
+    fly: bool = False,
+) -> tuple[str, dict[str, Any]]:
+    """``pirl plan``: one episode written into the new folder ``out``, as one mission or, with
+    ``uavs`` K > 1, as a fleet's K missions; (the policy's label, the written summary). A
+    fleet's folders are flown one by one, so ``fly`` with a fleet is refused."""
+    env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
+    if uavs == 1:
+        return what, write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
+    if fly:
+        raise ConfigError("--fly: a fleet's folders fly one by one (pirl fly OUT/uav-1)")
+    fleet = env.replace(uavs=uavs)
+    return what, write_fleet_missions(out, fleet, cfg.mission, team_for(chosen), seed, what, gimbal)
+
+
+__all__ = [
+    "FLEET_FILE",
+    "fleet_separation",
+    "plan_missions",
+    "record_fleet",
+    "uav_folder",
+    "write_fleet_missions",
+]

@@ -103,4 +103,15 @@ def picture(site: Site, seen: Seeability, path: Path, cell_px: int = 0) -> Path:
     return path
 
 
-__all__ = ["COLOURS", "REASON_TEXT", "check_site", "picture"]
+def site_report(
+    path: str | Path, env: VCPPConfig | None = None, drawn: Path | None = None
+) -> dict[str, Any]:
+    """:func:`check_site`'s report; with ``drawn``, the :func:`picture` written there and its
+    path in the report under ``picture``."""
+    site, seen, report = check_site(path, env)
+    if drawn is not None:
+        report["picture"] = str(picture(site, seen, drawn))
+    return report
+
+
+__all__ = ["COLOURS", "REASON_TEXT", "check_site", "picture", "site_report"]

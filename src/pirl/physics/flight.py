@@ -55,7 +55,8 @@ from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
 from pirl.world.footprint import PAPER, CameraPose, buffer_rows, footprint_model
 from pirl.world.metrics import episode_metrics
-from pirl.world.state import Scenario, WorldBatch, draw_scenario
+from pirl.world.scenario import Scenario, draw_scenario
+from pirl.world.state import WorldBatch
 
 Cell = tuple[int, int, int]
 

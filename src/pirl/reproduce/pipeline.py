@@ -20,6 +20,7 @@ from pirl.agents.loading import BUILTIN
 from pirl.agents.methods import ADVISED, asks, method
 from pirl.agents.run_folder import RunFolder, folder_lock
 from pirl.config.errors import UserError
+from pirl.config.presets import load_preset, preset_path
 from pirl.config.run import RunConfig
 from pirl.evaluate.runner import (
     MethodSpec,
@@ -119,6 +120,24 @@ def start_gifs(
         pool.submit(_record_gif, spec, cfg_dict, seed, folder / f"{spec.key}.gif")
         for spec in distinct_specs(specs)
     ]
+
+
+def reproduce_settings(
+    profile: str,
+    config: Path | None = None,
+    seeds: list[int] | None = None,
+    out: Path | None = None,
+    advisor: str | None = None,
+) -> tuple[Path, RunConfig, Path, str]:
+    """What ``pirl reproduce`` runs: (the preset's path, the preset, the output folder, the
+    advisor). The preset is ``config`` when given, else the ``profile``'s, with ``seeds``,
+    when given, as ``reproduce.seeds``; ``out`` defaults to ``results/<profile>`` and
+    ``advisor`` to the preset's."""
+    path = preset_path(config, "--config") if config else preset_path(profile, "--profile")
+    cfg = load_preset(path)
+    if seeds:
+        cfg = cfg.with_overrides(reproduce={"seeds": list(seeds)})
+    return path, cfg, out or Path("results") / profile, advisor or cfg.pare.advisor
 
 
 def reproduce(

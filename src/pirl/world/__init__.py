@@ -5,7 +5,8 @@ Pure numpy/numba: no reinforcement learning and no LLM here.
 """
 
 from pirl.world.metrics import episode_metrics
-from pirl.world.state import Scenario, WorldBatch, draw_scenario
+from pirl.world.scenario import Scenario, draw_scenario
+from pirl.world.state import WorldBatch
 
 __all__ = [
     "Scenario",

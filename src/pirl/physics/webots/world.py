@@ -150,4 +150,23 @@ def write_world(
     return written
 
 
-__all__ = ["CONTROLLER", "world_text", "write_world", "zoom_fov_range"]
+def write_mavic_world(
+    out: Path,
+    env_cfg: VCPPConfig,
+    seed: int,
+    policy: str = "boustrophedon",
+    cell_size_m: float = 2.0,
+    env_beside: bool = False,
+    controller: bool = True,
+) -> list[Path]:
+    """``pirl webots-world``: :func:`write_world` at the Mavic's scale (cells and levels of
+    ``cell_size_m``); with ``env_beside``, the env settings written as ``<world>.env.yaml``.
+    The paths written."""
+    physics = PhysicsConfig(cell_size_m=cell_size_m, level_height_m=cell_size_m, body_radius_m=0.25)
+    # The controller reads env settings alone (its own --config), so it gets the preset's env
+    # section as a file of its own, by absolute path (Webots runs it in its own folder).
+    env_file = out.with_name(f"{out.stem}.env.yaml").resolve() if env_beside else None
+    return write_world(out, env_cfg, seed, physics, policy, env_file, controller)
+
+
+__all__ = ["CONTROLLER", "world_text", "write_mavic_world", "write_world", "zoom_fov_range"]
