@@ -351,6 +351,12 @@ class ReproduceSettings(Settings, section="reproduce"):
     """For each of ``sites``: write the planner's and the best learned policy's missions
     (``pirl plan``) into ``<out>/missions/``, fly them back from their files in PyFlyt
     (``pirl fly``) and put both in the report."""
+    uavs: tuple[int, ...] = ()
+    """Fleet sizes (docs/fleets.md) the planner and the trained runs of ``fleet_methods`` are
+    also flown at on each of ``sites`` (``pirl evaluate --uavs``; K = 1 among them for the
+    speed-ups), into the report's Fleets table and figure. Empty: no fleets."""
+    fleet_methods: tuple[str, ...] = ("ppo-ewri",)
+    """Trained methods flown in fleets (the planner always is)."""
     workers: int = 2
     """Evaluation worker processes."""
     gif_every: int = 2
@@ -391,6 +397,10 @@ class ReproduceSettings(Settings, section="reproduce"):
             raise self.refuse("seeds", "must be a non-empty list of integers")
         for seed in self.seeds:
             check_seed(seed, "reproduce.seeds:")
+        if any(not isinstance(k, int) or k < 1 for k in self.uavs):
+            raise self.refuse("uavs", "write fleet sizes >= 1, e.g. [1, 2, 4], or leave it out")
+        if self.uavs and not self.sites:
+            raise self.refuse("uavs", "fleets fly on reproduce.sites: name at least one site")
 
 
 TEMPLATE_VARIANT = "file:"

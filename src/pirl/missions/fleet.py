@@ -74,11 +74,24 @@ def record_fleet(cfg: VCPPConfig, team: Team, seed: int) -> tuple[list[Episode],
             cameras[u],
             firsts[u],
             steps[u],
-            {**row, "battery_left": world.battery(u), "steps": int(world.status[u]["steps"])},
+            _uav_metrics(row, u, world.battery(u), int(world.status[u]["steps"])),
         )  # fmt: skip
         for u in range(k)
     ]
     return episodes, row
+
+
+def _uav_metrics(row: dict[str, Any], u: int, battery: float, steps: int) -> dict[str, Any]:
+    """UAV ``u``'s share of the fleet's row: its own ``vcr`` is the cells credited to it (what
+    ``pirl fly`` of its folder alone is compared with: flown alone it sees at least those),
+    beside ``fleet_vcr``."""
+    share = row["credit"][u] / row["coverable"] if row["coverable"] else 0.0
+    everything = row["covered"] / row["vcr_all"] if row["vcr_all"] else 0
+    return {
+        **row, "fleet_vcr": row["vcr"], "vcr": share,
+        "vcr_all": row["credit"][u] / everything if everything else 0.0,
+        "battery_left": battery, "steps": steps,
+    }  # fmt: skip
 
 
 def _coverage(world: Any) -> float:
@@ -127,6 +140,7 @@ def write_fleet_missions(
             name = uav_folder(u)
             summary = write_files(tmp / name, plan, cfg, settings, what, seed, gimbal, name)
             summary["takeoff_delay_s"] = apart.delays_s[u][: len(plan.parts)]
+            summary["fleet_vcr"] = row["vcr"]  # its own "vcr" is the cells credited to it
             (tmp / name / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
             uavs.append({
                 "folder": name, "home": summary["home"], "sorties": summary["sorties"],

@@ -438,9 +438,13 @@ def write_report(
     notes: Sequence[str] = (),
     headline_act: str = "stochastic",
     extras: Sequence[tuple[str, Table, Path]] = (),
+    fleet_summary: Path | None = None,
 ) -> Path:
     """Write table.md, figure.png, intervals_<act>.png, learning_curves.png and report.html;
     returns the path of report.html.
+
+    ``fleet_summary``: the summary of fleets evaluated apart, whose Fleets table and figure
+    the report adds (fleet rows in ``summary`` itself are shown the same way).
 
     ``extras``: further (title, table, figure) to show after the advice table (the
     advice-quality curve of ``pirl reproduce --profile study-advice``, the missions of
@@ -462,6 +466,10 @@ def write_report(
     # The paper's tables compare single UAVs; fleets (--uavs) get their own table and figure.
     rows, records = single(every_row), single(every_record)
     acts = acts_of(rows, headline_act)
+    if fleet_summary is not None:  # fleets evaluated apart (pirl reproduce's reproduce.uavs)
+        every_row += read_summary(fleet_summary)
+        with Path(fleet_summary).with_name("episodes.jsonl").open() as fh:
+            every_record += [json.loads(line) for line in fh]
     every_name = display_names(every_row)
     fleets = fleet_table(every_row, every_name)
     figure = coverage_figure(every_record, folder / "fleet_coverage.png", every_name)

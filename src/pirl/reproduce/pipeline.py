@@ -196,6 +196,14 @@ def run_reproduction(
             evaluation, out / "eval", plan.eval_workers, progress=progress, ray_address=ray_address
         )
         gifs = dict(job.result() for job in gif_jobs)
+    fleets = plan.fleet_eval_plan()
+    fleet_summary = None
+    if fleets is not None:
+        sites = ", ".join(Path(s).name for s in fleets.sites)
+        log(f"flying fleets of {', '.join(map(str, fleets.uavs))} UAVs on {sites}")
+        fleet_summary = evaluate(
+            fleets, out / "eval-fleets", plan.eval_workers, ray_address=ray_address
+        )
     stats = _advisor_stats(runs, out / "eval" / "episodes.jsonl", log)
     notes = [
         f"Profile values: {rp.episodes} scenarios per size ({rp.llm_only_episodes} for "
@@ -231,6 +239,7 @@ def run_reproduction(
         notes=notes,
         headline_act=rp.headline_act,
         extras=extras,
+        fleet_summary=fleet_summary,
     )
 
 

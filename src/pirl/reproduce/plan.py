@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 from pirl.advice.registry import BUILTIN as BUILTIN_ADVISORS
 from pirl.advice.registry import advisor_kind
 from pirl.agents.loading import check_act
-from pirl.agents.methods import asks, label, trained_method
+from pirl.agents.methods import PLANNER, asks, label, trained_method
 from pirl.agents.run_folder import RunFolder
 from pirl.agents.runs import check_layouts
 from pirl.agents.settings import check_budgets, method_steps
@@ -303,6 +303,24 @@ class Plan:
             sim_sites={Sim.PHYSICS: []},  # reproduce.sites: zero-shot in the grid simulator
         )
 
+    def fleet_eval_plan(self) -> EvalPlan | None:
+        """The fleets of ``reproduce.uavs`` on the profile's sites: the planner and the runs
+        of ``reproduce.fleet_methods``, K = 1 among the sizes (None: no fleets)."""
+        rp, ev = self.cfg.reproduce, self.evaluation
+        if not rp.uavs:
+            return None
+        runs = [f for f in self.folders if f.name.rsplit("-s", 1)[0] in rp.fleet_methods]
+        return EvalPlan(
+            specs=[*map(spec_for_run, runs), spec_for_builtin(PLANNER.name)],
+            sizes=[],
+            episodes=rp.episodes,
+            env=self.cfg.env,
+            config=self.cfg,
+            acts=list(rp.acts),
+            sites=list(ev.sites),
+            uavs=sorted({1, *rp.uavs}),
+        )
+
 
 @dataclass(frozen=True)
 class CheckedProfile:
@@ -333,7 +351,17 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
     # The sizes are generated worlds even when the runs train on a site.
     generated = cfg.env.replace(site="", ground_cells=0)
     check_layouts(generated, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
-    return CheckedProfile(cfg, advisor, workers, tuple(runs), tuple(profile_sites(cfg)))
+    sites = tuple(profile_sites(cfg))
+    if rp.uavs:
+        from pirl.evaluate.runner import check_fleet_starts
+        from pirl.world.seeable import with_site
+
+        for name in rp.fleet_methods:
+            if trained_method(name, "reproduce.fleet_methods").name not in rp.methods:
+                raise ConfigError(f"reproduce.fleet_methods: {name!r} is not in reproduce.methods")
+        for site in sites:
+            check_fleet_starts(with_site(cfg.env, str(site)), max(rp.uavs))
+    return CheckedProfile(cfg, advisor, workers, tuple(runs), sites)
 
 
 def make_plan(profile: CheckedProfile, out: Path) -> Plan:
