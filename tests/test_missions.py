@@ -395,3 +395,15 @@ def test_a_fleet_that_cannot_keep_apart_is_refused_in_one_line_and_writes_nothin
     proc = pirl("plan", "--method", "boustrophedon", "--size", "20", "20", "3", "--uavs", "0",
                 "--out", str(out))  # fmt: skip
     one_error_line(proc, "uavs")
+
+
+def test_a_fleet_flies_back_from_its_files_with_the_grid_fleets_coverage(tmp_path: Path) -> None:
+    out = tmp_path / "fleet"
+    proc = plan(out, "--size", "10", "10", "3", "--seed", "3", "--uavs", "2", "--fly", "physics")
+    assert "fleet flown: VCR" in proc.stdout
+    flown = json.loads((out / "flown.json").read_text())
+    assert flown["uavs"] == 2 and abs(flown["vcr"] - flown["vcr_grid"]) <= 0.03
+    assert len(flown["members"]) == 2 and "not flown together" in flown["between_drones"]
+    for u in (1, 2):  # each UAV's own flight, beside its credited cells in the grid
+        alone = json.loads((out / f"uav-{u}" / "flown.json").read_text())
+        assert alone["vcr"] >= alone["vcr_grid"] - 0.03 and alone["end"] == "mission_complete"

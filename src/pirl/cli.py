@@ -395,8 +395,8 @@ def plan(
     )
     if uavs != 1:
         print_fleet_summary(out, summary)
-        return
-    print_plan_summary(out, what, summary, cfg.mission.speed_m_s)
+    else:
+        print_plan_summary(out, what, summary, cfg.mission.speed_m_s)
     if fly:
         fly_and_print(out, cfg.physics)
 

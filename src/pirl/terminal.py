@@ -364,7 +364,25 @@ def copies_format_example(rec: Any, prompt: str) -> bool:
 
 
 def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
+    from pirl.missions.fleet import FLEET_FILE, fly_fleet
     from pirl.missions.fly import fly_mission, read_flight
+
+    if (folder / FLEET_FILE).is_file():
+        console.print(
+            f"flying the fleet in {folder} back from its files in PyFlyt, one UAV at a time ..."
+        )
+        f = fly_fleet(folder, physics, wind, log=lambda line: console.print(line, highlight=False))
+        for m in f["members"]:
+            console.print(
+                f"{m['folder']}: VCR {m['vcr_alone']:.3f} flown alone (its credited cells in the "
+                f"grid {m['vcr_grid']:.3f}), energy {m['energy_used']:.3f} of a battery (grid "
+                f"{m['energy_used_grid']:.3f}), end {m['end']}, {m['contacts']} contacts"
+            )
+        console.print(
+            f"fleet flown: VCR {f['vcr']:.3f} (grid {f['vcr_grid']:.3f}), energy "
+            f"{f['energy_used']:.3f} batteries; wrote {folder / 'flown.json'}"
+        )
+        return
 
     files = read_flight(folder)
     for line in files.warnings:

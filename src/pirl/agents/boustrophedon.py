@@ -80,20 +80,28 @@ class BoustrophedonPolicy(Policy):
         self.sweeping = True
 
     def _lanes(self, view: WorldView) -> list[Cell]:
-        """Serpentine lane points at the sweep altitude, spaced by the footprint width."""
+        """Serpentine lane points at the sweep altitude, spaced by the footprint's width across
+        the lane: along x over the whole grid, or, for a fleet's part, over the part's bounding
+        box along whichever axis needs fewer lanes, from the corner nearest the UAV."""
         sx, sy, _ = view.cfg.size
-        cy = sy // 2
-        fp = view.footprint((sx // 2, cy, self.altitude), self.camera)
-        dy_min, dy_max = int(fp[:, 1].min()) - cy, int(fp[:, 1].max()) - cy
-        spacing = max(1, dy_max - dy_min + 1)
-        lanes = list(range(min(sy - 1, max(0, -dy_min)), sy, spacing))
-        if lanes[-1] + dy_max < sy - 1:
-            lanes.append(max(lanes[-1] + 1, min(sy - 1, sy - 1 - dy_max)))
-        points = []
-        for k, lane_y in enumerate(lanes):
-            xs = range(sx) if k % 2 == 0 else range(sx - 1, -1, -1)
-            points.extend((x, lane_y, self.altitude) for x in xs)
-        return points
+        cx, cy = sx // 2, sy // 2
+        fp = view.footprint((cx, cy, self.altitude), self.camera)
+        reach = {  # (nearest, farthest) footprint offset across a lane of each axis
+            0: (int(fp[:, 1].min()) - cy, int(fp[:, 1].max()) - cy),
+            1: (int(fp[:, 0].min()) - cx, int(fp[:, 0].max()) - cx),
+        }
+        if self.part is None or not self.part.any():
+            return _serpentine(0, sx - 1, 0, sy - 1, reach[0], 0, self.altitude)
+        xs, ys = np.nonzero(self.part)
+        box = (int(xs.min()), int(xs.max()), int(ys.min()), int(ys.max()))
+        start = view.position
+        best: list[Cell] = []
+        for axis in (0, 1):
+            for flip in (False, True):
+                points = _serpentine(*box, reach[axis], axis, self.altitude, flip)
+                if not best or _lanes_cost(points, start) < _lanes_cost(best, start):
+                    best = points
+        return best
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         if self.world is None:
@@ -161,10 +169,47 @@ class BoustrophedonPolicy(Policy):
         return None, []
 
 
+def _serpentine(
+    x0: int,
+    x1: int,
+    y0: int,
+    y1: int,
+    reach: tuple[int, int],
+    axis: int,
+    z: int,
+    flip: bool = False,
+) -> list[Cell]:
+    """Lane points over the box ``[x0, x1] x [y0, y1]``: lanes along x (``axis`` 0, one per
+    footprint width in y) or along y (``axis`` 1); ``flip`` starts at the far lane and the
+    far end. ``reach``: the footprint's (nearest, farthest) offset across a lane."""
+    lo, hi = (y0, y1) if axis == 0 else (x0, x1)
+    a0, a1 = (x0, x1) if axis == 0 else (y0, y1)
+    near, far = reach
+    spacing = max(1, far - near + 1)
+    lanes = list(range(min(hi, max(lo, lo - near)), hi + 1, spacing))
+    if lanes[-1] + far < hi:
+        lanes.append(max(lanes[-1] + 1, min(hi, hi - far)))
+    if flip:
+        lanes.reverse()
+    points: list[Cell] = []
+    for k, lane in enumerate(lanes):
+        along = range(a0, a1 + 1) if (k % 2 == 0) != flip else range(a1, a0 - 1, -1)
+        points.extend((a, lane, z) if axis == 0 else (lane, a, z) for a in along)
+    return points
+
+
+def _lanes_cost(points: list[Cell], start: Cell) -> int:
+    """The moves of a sweep through ``points`` from ``start`` (the way there included)."""
+    a = np.array([start, *points])[:, :2]
+    return int(np.abs(np.diff(a, axis=0)).sum())
+
+
 def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
     """One planner per UAV of world ``g`` (reset each with its slot), each given its part of
     the area split at the sweep altitude (:func:`pirl.world.split.split_area`)."""
     k = world.uavs
+    if k == 1:  # the single UAV's own planner: a fleet of one flies as it does
+        return [BoustrophedonPolicy()]
     view = WorldView.of(world, g * k)
     _, altitude = largest_footprint_camera(view)
     passable = ~view.blocked[:, :, altitude]

@@ -11,18 +11,22 @@ makespan, each UAV's take-off delay per wave and the closest approach
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gymnasium.utils import seeding
 
+from pirl._atomic import write_atomic
 from pirl.config.errors import ConfigError
 from pirl.config.mission import MissionSettings
+from pirl.config.physics import PhysicsConfig
 from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.evaluate.fleet import Team, fleet_row, team_for
+from pirl.missions.fly import fly_mission
 from pirl.missions.items import Episode, Step
 from pirl.missions.separation import Separation, separate, track
 from pirl.missions.write import (
@@ -138,7 +142,9 @@ def write_fleet_missions(
         uavs = []
         for u, plan in enumerate(plans):
             name = uav_folder(u)
-            summary = write_files(tmp / name, plan, cfg, settings, what, seed, gimbal, name)
+            # A member flies alone (pirl fly uav-N): its world is the fleet's with one UAV.
+            alone = cfg.replace(uavs=1)
+            summary = write_files(tmp / name, plan, alone, settings, what, seed, gimbal, name)
             summary["takeoff_delay_s"] = apart.delays_s[u][: len(plan.parts)]
             summary["fleet_vcr"] = row["vcr"]  # its own "vcr" is the cells credited to it
             (tmp / name / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
@@ -202,19 +208,62 @@ def plan_missions(
     fly: bool = False,
 ) -> tuple[str, dict[str, Any]]:
     """``pirl plan``: one episode written into the new folder ``out``, as one mission or, with
-    ``uavs`` K > 1, as a fleet's K missions; (the policy's label, the written summary). A
-    fleet's folders are flown one by one, so ``fly`` with a fleet is refused."""
+    ``uavs`` K > 1, as a fleet's K missions; (the policy's label, the written summary)."""
     env, chosen, what = mission_source(cfg.env, seed, policy, method, act, site, size)
     if uavs == 1:
         return what, write_mission(out, env, cfg.mission, chosen, seed, what, gimbal)
-    if fly:
-        raise ConfigError("--fly: a fleet's folders fly one by one (pirl fly OUT/uav-1)")
     fleet = env.replace(uavs=uavs)
     return what, write_fleet_missions(out, fleet, cfg.mission, team_for(chosen), seed, what, gimbal)
 
 
+def fly_fleet(
+    folder: Path,
+    physics: PhysicsConfig | None = None,
+    wind: bool = True,
+    log: Callable[[str], Any] | None = None,
+) -> dict[str, Any]:
+    """``pirl fly`` of a fleet's folder: every UAV's files read back and flown in PyFlyt (each
+    in an Aviary of its own, one after another: :func:`pirl.missions.fly.fly_mission`, which
+    writes each ``uav-N/flown.json``); the fleet's flown coverage is what any of them saw.
+    Writes and returns the fleet's ``flown.json``. Contacts between drones are not flown here:
+    the plan's separation in time is checked when it is written (``fleet.json``)."""
+    folder = Path(folder)
+    try:
+        fleet = json.loads((folder / FLEET_FILE).read_text())
+        members = [folder / m["folder"] for m in fleet["members"]]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(
+            f"{folder / FLEET_FILE}: not a fleet written by pirl plan ({exc})"
+        ) from None
+    seen = coverable = None
+    flown_members = []
+    for member in members:
+        flown = fly_mission(member, physics, wind, log)
+        seen = flown["covered"] if seen is None else seen | flown["covered"]
+        coverable = flown["coverable"]
+        flown_members.append({
+            "folder": member.name, "vcr_alone": flown["vcr"], "vcr_grid": flown["vcr_grid"],
+            "energy_used": flown["energy_used"], "energy_used_grid": flown["energy_used_grid"],
+            "steps": flown["steps"], "end": flown["end"], "contacts": flown["contacts"],
+            "ops_skipped": flown["ops_skipped"], "sim_seconds": flown["sim_seconds"],
+        })  # fmt: skip
+    assert seen is not None and coverable is not None
+    figures = {
+        "uavs": len(members),
+        "vcr": round(float((seen & coverable).sum() / max(1, coverable.sum())), 4),
+        "vcr_grid": fleet.get("vcr"),
+        "energy_used": round(sum(m["energy_used"] for m in flown_members), 4),
+        "contacts": sum(m["contacts"] for m in flown_members),
+        "members": flown_members,
+        "between_drones": "not flown together: the separation in time is fleet.json's check",
+    }
+    write_atomic(folder / "flown.json", json.dumps(figures, indent=1) + "\n")
+    return figures
+
+
 __all__ = [
     "FLEET_FILE",
+    "fly_fleet",
     "fleet_separation",
     "plan_missions",
     "record_fleet",

@@ -402,6 +402,7 @@ def fly_files(
         "wind": {"mean_m_s": list(physics.wind_mean), "gust_m_s": physics.wind_gust},
         "physics": "PyFlyt QuadX (cf2x) at physics.cell_size_m per cell (docs/physics.md)",
         "covered": mission.world.covered(0).copy(),
+        "coverable": mission.world.coverable[0].copy(),
     }
 
 
@@ -415,7 +416,7 @@ def fly_mission(
     beside them (atomically)."""
     files = folder if isinstance(folder, FlightFiles) else read_flight(folder)
     flown = fly_files(files, physics, wind, log)
-    figures = {k: v for k, v in flown.items() if k != "covered"}
+    figures = {k: v for k, v in flown.items() if k not in ("covered", "coverable")}
     _write(files.folder / "flown.json", json.dumps(figures, indent=1) + "\n")
     return flown
 
