@@ -211,8 +211,12 @@ def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
     if k == 1:  # the single UAV's own planner: a fleet of one flies as it does
         return [BoustrophedonPolicy()]
     view = WorldView.of(world, g * k)
-    _, altitude = largest_footprint_camera(view)
+    camera, altitude = largest_footprint_camera(view)
     passable = ~view.blocked[:, :, altitude]
     starts = [world.position(s)[:2] for s in range(g * k, g * k + k)]
-    owner = split_area(passable, view.coverable, starts)
+    # Ground a sweep covers per move: the area's ground over the single UAV's lane points.
+    sweep = BoustrophedonPolicy()
+    sweep.camera, sweep.altitude = camera, altitude
+    rate = float(view.coverable.sum()) / max(1, len(sweep._lanes(view)))
+    owner = split_area(passable, view.coverable, starts, cells_per_step=rate)
     return [BoustrophedonPolicy(owner == u) for u in range(k)]

@@ -84,13 +84,17 @@ def split_area(
     starts: list[tuple[int, int]],
     iterations: int = 200,
     tolerance: float = 0.03,
+    cells_per_step: float = 0.0,
 ) -> np.ndarray:
     """The owner (0..K-1, a UAV) of each ground cell to cover (``ground``, (X, Y) bool), -1
     for cells no start can reach or that are not ground.
 
     ``passable`` (X, Y) are the cells free at the flight altitude; ``starts`` the UAVs'
     cells (x, y). Biases are tuned for at most ``iterations`` rounds per Lloyd round, until
-    the largest part holds at most ``1 + tolerance`` times the mean.
+    the largest part holds at most ``1 + tolerance`` times its target. With
+    ``cells_per_step`` (how many ground cells a sweep covers per move) the targets balance
+    time rather than area: a part farther from the launch site holds fewer cells, by the
+    moves it takes to get there, so every UAV is due to finish at about the same step.
     """
     k = len(starts)
     owner = np.full(ground.shape, -1, dtype=np.int64)
@@ -109,11 +113,15 @@ def split_area(
         return owner
     seeds = _spread(reach, starts[0], k)
     pick = np.zeros(len(gx), dtype=np.int64)
+    targets = np.full(k, len(gx) / k)
+    launch = geodesic(reach, starts[0]).astype(np.float64)[ax, ay]
     for _ in range(LLOYD_ROUNDS):
         dist = np.stack([geodesic(reach, c)[ax, ay] for c in seeds]).astype(np.float64)
-        pick = _balanced(dist, iterations, tolerance)
+        pick = _balanced(dist, iterations, tolerance, targets)
         moved = [_centre(gx[pick == r], gy[pick == r], reach, seeds[r]) for r in range(k)]
-        if moved == seeds:
+        if cells_per_step > 0:
+            targets = _timed_targets(pick, launch, k, cells_per_step)
+        elif moved == seeds:
             break
         seeds = moved
     # Parts to UAVs: the nearest (UAV, part) pair first.
@@ -141,12 +149,25 @@ def _spread(reach: np.ndarray, launch: tuple[int, int], k: int) -> list[tuple[in
     return seeds
 
 
-def _balanced(dist: np.ndarray, iterations: int, tolerance: float) -> np.ndarray:
+def _timed_targets(pick: np.ndarray, launch: np.ndarray, k: int, rate: float) -> np.ndarray:
+    """Part sizes that finish together: part r's UAV first flies to it (the moves from the
+    launch site to its nearest cell), then covers ``rate`` cells a move; sizes add up."""
+    n = len(pick)
+    transit = np.array([launch[pick == r].min() if (pick == r).any() else 0.0 for r in range(k)])
+    finish = (n / rate + transit.sum()) / k
+    sizes = np.maximum(1.0, (finish - transit) * rate)
+    return sizes * n / sizes.sum()
+
+
+def _balanced(
+    dist: np.ndarray, iterations: int, tolerance: float, targets: np.ndarray | None = None
+) -> np.ndarray:
     """Each cell's part (``dist``: (K, cells) distances to the seeds), by distance plus a
-    bias tuned until the parts hold about equal numbers of cells; the most even seen."""
+    bias tuned until the parts hold about their ``targets`` numbers of cells (equal when
+    None); the most even seen."""
     k, n = dist.shape
     dist = np.where(dist >= UNREACHABLE, np.inf, dist)
-    target = n / k
+    target = np.full(k, n / k) if targets is None else np.asarray(targets, dtype=np.float64)
     scale = max(1.0, float(np.median(dist[np.isfinite(dist)])))
     bias = np.zeros(k)
     best, best_load = np.argmin(dist, axis=0), np.inf
@@ -154,7 +175,7 @@ def _balanced(dist: np.ndarray, iterations: int, tolerance: float) -> np.ndarray
     for _ in range(iterations):
         pick = np.argmin(dist + bias[:, None], axis=0)
         sizes = np.bincount(pick, minlength=k)
-        load = sizes.max() / target
+        load = (sizes / target).max()
         if load < best_load:
             best, best_load = pick, load
         if load <= 1.0 + tolerance:
