@@ -12,7 +12,7 @@ CAMPUS = str(Path(__file__).resolve().parents[1] / "examples" / "sites" / "campu
 
 def _worlds(plan: EvalPlan) -> dict[str, set]:
     found: dict[str, set] = {}
-    for _spec, world, sim, _seeds, _act in _tasks(plan, workers=2):
+    for _spec, world, sim, _seeds, _act, _uavs in _tasks(plan, workers=2):
         found.setdefault(sim, set()).add(world if isinstance(world, str) else tuple(world))
     return found
 
