@@ -26,7 +26,9 @@ from gymnasium.utils import seeding
 
 from pirl.agents.boustrophedon import BoustrophedonPolicy, fleet_planners
 from pirl.agents.loading import LearnedPolicy, act_rng
+from pirl.agents.methods import METHODS
 from pirl.agents.policy import Policy, RandomPolicy
+from pirl.config.choices import Sim
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
@@ -89,6 +91,49 @@ class SharedTeam(Team):
         masks = np.array([i["action_mask"] for i in infos], dtype=bool)
         actions = self.policy.act_batch(np.asarray(obs), self._rngs, masks).astype(np.int64)
         return np.where(active, actions, D.PARKED)
+
+
+def check_fleets(env: VCPPConfig, uavs: list[int], sims: list[str], methods: list[str]) -> None:
+    """Fleet sizes an evaluation can play, refused in one line: each K within the env's
+    bounds, the grid simulator only (a fleet's missions fly in physics with ``pirl fly``),
+    and methods that can fly in a fleet (:attr:`~pirl.agents.methods.Method.fleet`)."""
+    for k in uavs:
+        env.replace(uavs=k)  # the env's own bounds and message
+    if any(sim != Sim.GRID for sim in sims):
+        raise ConfigError(
+            f"--uavs {','.join(map(str, uavs))} plays fleets on the grid only (--sim grid); "
+            "a fleet's missions fly together in physics with pirl fly"
+        )
+    for name in methods:
+        found = METHODS.get(name)
+        if found is not None and not found.fleet:
+            raise ConfigError(f"--uavs: {found.label} flies one UAV; leave it out of a fleet")
+
+
+def check_fleet_starts(env: VCPPConfig, uavs: int) -> None:
+    """Refuse (one line) a fleet larger than the free cells next to a world's start can hold:
+    one world of ``uavs`` UAVs is reset as every scenario is."""
+    EnvCore(env.replace(uavs=uavs), 1).reset_world(0, seeding.np_random(0)[0])
+
+
+def fleet_records(
+    cfg: VCPPConfig, policy: Policy, seeds: list[int], base: dict, ids: dict
+) -> list[dict[str, Any]]:
+    """One evaluation record per seed of ``policy`` flown as a fleet of ``cfg.uavs`` UAVs:
+    ``base`` (method, label, sim, act, world), the seed, ``ids`` (train seed, source) and
+    the fleet's row."""
+    team = team_for(policy)
+    return [
+        {
+            **base,
+            "uavs": cfg.uavs,
+            "seed": seed,
+            **ids,
+            **run_fleet_episode(cfg, seed, team).row,
+            "llm_calls": 0,
+        }  # fmt: skip
+        for seed in seeds
+    ]
 
 
 def uav_seed(seed: int, u: int) -> int:
@@ -199,6 +244,9 @@ def speed_ups(rows: dict[int, list[dict]], key: str = "makespan_99") -> dict[int
 
 __all__ = [
     "CURVE",
+    "check_fleet_starts",
+    "check_fleets",
+    "fleet_records",
     "FleetEpisode",
     "PolicyTeam",
     "SharedTeam",

@@ -211,26 +211,11 @@ def run_chunk(
     if act != FIXED:
         policy.set_act(act)
     if uavs is not None:
-        from pirl.evaluate.fleet import run_fleet_episode, team_for
+        from pirl.evaluate.fleet import fleet_records
 
-        env_cfg = env_cfg.replace(uavs=uavs)
-        team = team_for(policy)
-        where["uavs"] = uavs
-        return [
-            {
-                "method": spec.key,
-                "label": spec.label,
-                "sim": sim,
-                "act": act,
-                **where,
-                "seed": seed,
-                "train_seed": spec.train_seed,
-                "source": spec.source,
-                **run_fleet_episode(env_cfg, seed, team).row,
-                "llm_calls": 0,
-            }  # fmt: skip
-            for seed in seeds
-        ]
+        base = {"method": spec.key, "label": spec.label, "sim": sim, "act": act, **where}
+        ids = {"train_seed": spec.train_seed, "source": spec.source}
+        return fleet_records(env_cfg.replace(uavs=uavs), policy, seeds, base, ids)
     records = []
     batch: list[dict[str, float]] = []
     if sim == "grid" and act != FIXED and batched:
@@ -304,33 +289,12 @@ def _act_sims(plan: EvalPlan, spec: MethodSpec) -> list[tuple[str, str]]:
 
 
 def check_fleet(plan: EvalPlan) -> None:
-    """Fleet sizes a plan can play, refused in one line: each K within the env's bounds, the
-    grid simulator only (a fleet is flown in physics from its missions: ``pirl fly``), and
-    methods that can fly in a fleet (:attr:`Method.fleet`)."""
-    if plan.uavs == [1]:
-        return
-    for k in plan.uavs:
-        plan.env.replace(uavs=k)  # the env's own bounds and message
-    if any(sim != Sim.GRID for sim in plan.sims):
-        raise ConfigError(
-            f"--uavs {','.join(map(str, plan.uavs))} plays fleets on the grid only (--sim grid); "
-            "a fleet's missions fly together in physics with pirl fly"
-        )
-    for spec in plan.specs:
-        name = spec.source if spec.source in BUILTIN else spec.key.split(":")[0]
-        found = METHODS.get(name)
-        if found is not None and not found.fleet:
-            raise ConfigError(f"--uavs: {found.label} flies one UAV; leave it out of a fleet")
+    """A plan's fleet sizes (:func:`pirl.evaluate.fleet.check_fleets`), refused in one line."""
+    if plan.uavs != [1]:
+        from pirl.evaluate.fleet import check_fleets
 
-
-def check_fleet_starts(env: VCPPConfig, uavs: int) -> None:
-    """Refuse (one line) a fleet larger than the free cells next to a world's start can hold:
-    one world of ``uavs`` UAVs is reset as every scenario is."""
-    from gymnasium.utils import seeding
-
-    from pirl.env.core import EnvCore
-
-    EnvCore(env.replace(uavs=uavs), 1).reset_world(0, seeding.np_random(0)[0])
+        names = [s.source if s.source in BUILTIN else s.key.split(":")[0] for s in plan.specs]
+        check_fleets(plan.env, plan.uavs, plan.sims, names)
 
 
 def check_workers(workers: int | None) -> None:
@@ -619,7 +583,10 @@ def evaluate_runs(
         uavs=sorted(set(uavs or [1])),
     )
     check_fleet(plan)
-    for site in site_list if plan.uavs != [1] else []:
-        check_fleet_starts(with_site(cfg.env, site), max(plan.uavs))
+    if plan.uavs != [1]:
+        from pirl.evaluate.fleet import check_fleet_starts
+
+        for site in site_list:
+            check_fleet_starts(with_site(cfg.env, site), max(plan.uavs))
     with folder_lock(out):
         return evaluate(plan, out, workers, progress=progress, ray_address=ray_address)

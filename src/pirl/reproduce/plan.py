@@ -353,7 +353,7 @@ def check_reproduce(cfg: RunConfig, advisor: str, workers: int | None = None) ->
     check_layouts(generated, [*map(parse_size, rp.sizes + rp.physics_sizes)], rp.episodes)
     sites = tuple(profile_sites(cfg))
     if rp.uavs:
-        from pirl.evaluate.runner import check_fleet_starts
+        from pirl.evaluate.fleet import check_fleet_starts
         from pirl.world.seeable import with_site
 
         for name in rp.fleet_methods:  # a method the profile does not train flies no fleet
