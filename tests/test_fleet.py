@@ -242,3 +242,14 @@ def test_pirl_refuses_fleet_training_in_one_line():
         build_env_stack(cfg, 0, advice=object())
     with pytest.raises(ConfigError, match="train.uavs"):
         RunConfig().with_overrides(train={"uavs": [0]})
+
+
+def test_a_fleets_gif_draws_every_step(tmp_path):
+    from pirl.agents.boustrophedon import BoustrophedonPolicy
+    from pirl.config.world import VCPPConfig
+    from pirl.evaluate.rollout import record_gif
+
+    cfg = VCPPConfig(size=(12, 12, 3), uavs=2)
+    result, path = record_gif(cfg, BoustrophedonPolicy(), 3, tmp_path / "fleet.gif")
+    assert result.metrics["uavs"] == 2 and result.metrics["vcr"] >= 0.99
+    assert len(result.frames) == result.metrics["steps"] + 1 and path.stat().st_size > 0

@@ -62,13 +62,14 @@ def render(
     site: Annotated[
         Path | None, typer.Option(help="A site folder to fly instead of a generated world.")
     ] = None,
+    uavs: Annotated[int, typer.Option(help="A fleet of K UAVs (docs/fleets.md).")] = 1,
 ) -> None:
     """Fly one episode with a simple policy and write it as an animated GIF."""
     from pirl.evaluate.rollout import check_gif_target, record_gif
 
     check_seed(seed)
     check_gif_target(out, fps)
-    cfg = env_settings(config, size, footprint, site)
+    cfg = env_settings(config, size, footprint, site).replace(uavs=uavs)
     result, path = record_gif(cfg, make_policy(policy, seed), seed, out, fps)
     console.print(metrics_table([(policy, result.metrics)], f"{cfg.size} seed {seed}"))
     console.print(f"wrote {path} ({len(result.frames)} frames)")

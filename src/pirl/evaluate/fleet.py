@@ -32,6 +32,7 @@ from pirl.config.choices import Sim
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
+from pirl.env.render import render_world
 from pirl.world import dynamics as D
 from pirl.world.metrics import fleet_metrics
 from pirl.world.state import WorldBatch
@@ -158,17 +159,22 @@ def team_for(policy: Policy) -> Team:
 
 @dataclass
 class FleetEpisode:
-    """One fleet episode: its row, and the fleet's coverage after each step."""
+    """One fleet episode: its row, the fleet's coverage after each step and, when recorded,
+    its frames."""
 
     seed: int
     row: dict[str, Any]
     coverage: list[float] = field(default_factory=list)
+    frames: list[np.ndarray] = field(default_factory=list)
 
 
-def run_fleet_episode(cfg: VCPPConfig, seed: int, team: Team | None = None) -> FleetEpisode:
+def run_fleet_episode(
+    cfg: VCPPConfig, seed: int, team: Team | None = None, record: bool = False
+) -> FleetEpisode:
     """Reset a world of ``cfg.uavs`` UAVs with ``seed`` (as ``VCPPEnv.reset(seed=seed)`` and
     :class:`~pirl.env.fleet.FleetParallelEnv` do) and let ``team`` (default: the planner's
-    split) fly it until the fleet's episode ends."""
+    split) fly it until the fleet's episode ends; ``record`` keeps a frame per step (each
+    UAV in its colour)."""
     team = team or PolicyTeam(fleet_planners)
     core = EnvCore(cfg, 1)
     core.reset_world(0, seeding.np_random(seed)[0])
@@ -176,13 +182,16 @@ def run_fleet_episode(cfg: VCPPConfig, seed: int, team: Team | None = None) -> F
     team.reset(world, 0, seed)
     infos = core.infos()
     coverage = [_coverage(world)]
+    frames = [render_world(world, 0, None, cfg.render_cell_px)] if record else []
     while True:
         core.step(team.act(core.obs, infos, ~world.left[: world.uavs].astype(bool)))
         infos = core.infos()
         coverage.append(_coverage(world))
+        if record:
+            frames.append(render_world(world, 0, None, cfg.render_cell_px))
         if len(core.worlds_over()):
             break
-    return FleetEpisode(seed, fleet_row(world, 0, coverage), coverage)
+    return FleetEpisode(seed, fleet_row(world, 0, coverage), coverage, frames)
 
 
 def fleet_row(world: WorldBatch, g: int, coverage: Sequence[float]) -> dict[str, Any]:

@@ -106,7 +106,13 @@ def record_gif(
     check_gif_target(Path(out), fps)
     px = cell_pixels(cfg.size, cfg.render_cell_px)
     check_memory(cfg, 1, per_step_bytes=cfg.size[0] * cfg.size[1] * px * px * 3)
-    result = run_episode(VCPPEnv(cfg, render_mode="rgb_array"), policy, seed, record=True)
+    if cfg.uavs > 1:  # a fleet: each UAV in its colour (docs/fleets.md)
+        from pirl.evaluate.fleet import run_fleet_episode, team_for
+
+        fleet = run_fleet_episode(cfg, seed, team_for(policy), record=True)
+        result = EpisodeResult(seed, fleet.row, fleet.frames)
+    else:
+        result = run_episode(VCPPEnv(cfg, render_mode="rgb_array"), policy, seed, record=True)
     return result, save_gif(result.frames, out, fps=fps)
 
 
