@@ -406,4 +406,5 @@ def test_a_fleet_flies_back_from_its_files_with_the_grid_fleets_coverage(tmp_pat
     assert len(flown["members"]) == 2 and "not flown together" in flown["between_drones"]
     for u in (1, 2):  # each UAV's own flight, beside its credited cells in the grid
         alone = json.loads((out / f"uav-{u}" / "flown.json").read_text())
-        assert alone["vcr"] >= alone["vcr_grid"] - 0.03 and alone["end"] == "mission_complete"
+        assert alone["vcr"] >= alone["vcr_grid"] - 0.03
+        assert alone["end"] in ("coverage", "mission_complete")  # alone it may see everything
