@@ -20,12 +20,13 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.env.observation import obs_size_for
 from pirl.env.render import render_world
+from pirl.env.sb3_vec import SharedVecEnvPlumbing
 from pirl.env.shaping import ShapingHooks
 from pirl.world import dynamics as D
 from pirl.world.scenario import Scenario
@@ -159,7 +160,7 @@ def parallel_env(**kwargs: Any) -> FleetParallelEnv:
     return FleetParallelEnv(**kwargs)
 
 
-class FleetVecEnv(ShapingHooks, VecEnv):
+class FleetVecEnv(SharedVecEnvPlumbing, ShapingHooks, VecEnv):
     """N fleet worlds of K UAVs as one Stable-Baselines3 ``VecEnv`` of N*K slots.
 
     Slot ``world * K + uav`` is one UAV: one policy acts for every UAV (parameter sharing),
@@ -267,30 +268,6 @@ class FleetVecEnv(ShapingHooks, VecEnv):
         parked slot: one)."""
         return self.core.masks.copy()
 
-    def close(self) -> None:
-        return None
-
-    def _indices_list(self, indices: VecEnvIndices) -> list[int]:
-        return list(self._get_indices(indices))
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name) for _ in self._indices_list(indices)]
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
-    ) -> list[Any]:
-        slots = self._indices_list(indices)
-        if method_name == "action_masks":
-            return list(self.core.masks[slots])
-        method = getattr(self, method_name)
-        return [method(*method_args, **method_kwargs) for _ in slots]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        return [False for _ in self._indices_list(indices)]
-
     def get_images(self) -> Sequence[np.ndarray | None]:
         k = self.uavs
         return [
@@ -313,7 +290,7 @@ def make_fleet_vec_env(
     return venv
 
 
-class MixedFleetVecEnv(VecEnv):
+class MixedFleetVecEnv(SharedVecEnvPlumbing, VecEnv):
     """Fleets of several sizes side by side as one ``VecEnv``: a :class:`FleetVecEnv` per
     fleet size K, their slots one after the other (``sizes[0]``'s first), so one masked
     policy learns from fleets of every size at once. Each K gets about the same number of
@@ -372,27 +349,6 @@ class MixedFleetVecEnv(VecEnv):
     def load_state_dict(self, state: dict[str, Any]) -> None:
         for part, saved in zip(self.parts, state["parts"], strict=True):
             part.load_state_dict(saved)
-
-    def close(self) -> None:
-        return None
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name) for _ in self._get_indices(indices)]
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
-    ) -> list[Any]:
-        slots = list(self._get_indices(indices))
-        if method_name == "action_masks":
-            return list(self.action_masks()[slots])
-        method = getattr(self, method_name)
-        return [method(*method_args, **method_kwargs) for _ in slots]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [image for p in self.parts for image in p.get_images()]

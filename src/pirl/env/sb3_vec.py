@@ -20,7 +20,38 @@ from pirl.world import dynamics as D
 from pirl.world.state import WorldBatch
 
 
-class VCPPVecEnv(ShapingHooks, VecEnv):
+class SharedVecEnvPlumbing:
+    """SB3's ``VecEnv`` plumbing for a batch whose slots share one Python object: attributes
+    and methods are the vec env's own, nothing is wrapped, and ``action_masks`` (asked of
+    every slot at every step by sb3-contrib) is one batched copy of :meth:`action_masks`."""
+
+    def action_masks(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        return None
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        slots = self._get_indices(indices)  # type: ignore[attr-defined]
+        return [getattr(self, attr_name) for _ in slots]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        slots = list(self._get_indices(indices))  # type: ignore[attr-defined]
+        if method_name == "action_masks":
+            return list(self.action_masks()[slots])
+        method = getattr(self, method_name)
+        return [method(*method_args, **method_kwargs) for _ in slots]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]  # type: ignore[attr-defined]
+
+
+class VCPPVecEnv(SharedVecEnvPlumbing, ShapingHooks, VecEnv):
     """N VCPP worlds on batched numpy arrays (see :class:`pirl.env.vcpp_env.VCPPEnv`).
 
     World ``i`` seeded with ``s`` behaves exactly like a single ``VCPPEnv`` reset with seed
@@ -111,32 +142,6 @@ class VCPPVecEnv(ShapingHooks, VecEnv):
         current state (after auto-reset: the new episode's). See ``VCPPEnv.action_masks``."""
         return self.core.masks.copy()
 
-    def close(self) -> None:
-        return None
-
-    # -- VecEnv plumbing: every world shares one object, so attributes are the vec env's ----
-    def _indices_list(self, indices: VecEnvIndices) -> list[int]:
-        return list(self._get_indices(indices))
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name) for _ in self._indices_list(indices)]
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs
-    ) -> list[Any]:
-        worlds = self._indices_list(indices)
-        if method_name == "action_masks":
-            # sb3-contrib asks every world for its mask at every step: one batched copy.
-            return list(self.core.masks[worlds])
-        method = getattr(self, method_name)
-        return [method(*method_args, **method_kwargs) for _ in worlds]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        return [False for _ in self._indices_list(indices)]
-
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [
             render_world(self.world, e, None, self.cfg.render_cell_px) for e in range(self.num_envs)
@@ -161,4 +166,4 @@ def make_vec_env(
     return venv
 
 
-__all__ = ["VCPPVecEnv", "make_vec_env"]
+__all__ = ["SharedVecEnvPlumbing", "VCPPVecEnv", "make_vec_env"]
