@@ -28,6 +28,16 @@ os.environ.setdefault("PIRL_NUMBA_CACHE", str(cache_root() / "numba"))
 
 EMPTY = np.zeros((0, 4))
 
+
+@pytest.fixture(scope="session", autouse=True)
+def _compiled_kernels() -> None:
+    """The step kernels compiled once for every test process (the first compiles under the
+    cache's lock, the others load what it wrote), not once per process on a fresh cache."""
+    from pirl.env.core import compile_kernels
+
+    compile_kernels()
+
+
 # One torch thread per test process, as the product's own training and evaluation set it
 # (ppo.torch_threads, evaluation workers). `make test` runs one test worker per core; torch's
 # default of one thread per core in each worker makes them spin against each other: fitting

@@ -8,15 +8,18 @@ that holds kernels makes any edit start a fresh cache.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 from pirl._paths import cache_root
 
 _KERNEL_PACKAGES = ("world", "env", "pare", "physics")
 _KEEP = 3
+_folder: Path | None = None
 
 
 def configure() -> Path | None:
@@ -37,7 +40,26 @@ def configure() -> Path | None:
         return None  # read-only home: numba falls back to compiling in memory
     numba.config.CACHE_DIR = str(folder)
     _prune(base, folder)
+    global _folder
+    _folder = folder
     return folder
+
+
+@contextlib.contextmanager
+def compiling() -> Iterator[None]:
+    """Hold the cache folder's file lock while compiling kernels.
+
+    numba does not coordinate processes: two that start together on a fresh cache (training
+    workers, test workers) each compile every kernel (about 25 CPU-s for the step kernels).
+    Under this lock the first compiles and writes the cache; the others wait, then load it.
+    """
+    if _folder is None:
+        yield
+        return
+    from filelock import FileLock
+
+    with FileLock(str(_folder / ".compile.lock")):
+        yield
 
 
 def _prune(base: Path, current: Path) -> None:

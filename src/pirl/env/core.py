@@ -54,7 +54,7 @@ def step_world(w, p, layout, env, e, a):
     return w.flags[e]["terminated"] | w.flags[e]["truncated"]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _close_slot(w, p, layout, env, e):
     """Slot e's reward (its terms weighed), observation and mask after a step."""
     terms, weights = w.terms, env.weights
@@ -254,3 +254,16 @@ class EnvCore:
         if lazy:
             return list(map(LazyInfo, repeat(snap), idx))
         return [snap.info(e) for e in idx]
+
+
+def compile_kernels() -> None:
+    """Compile, or load from numba's cache, the serial step kernels of one UAV and of a fleet,
+    once per cache folder: processes that start together (training workers, test workers)
+    wait for the first to write the cache instead of each compiling the same kernels."""
+    from pirl import _numba_cache
+
+    with _numba_cache.compiling():
+        for uavs in (1, 2):
+            core = EnvCore(VCPPConfig(size=(5, 5, 3), uavs=uavs), 1, parallel=False)
+            core.reset_world(0, np.random.default_rng(0))
+            core.step(np.zeros(core.slots, dtype=np.int64))

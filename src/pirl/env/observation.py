@@ -104,7 +104,7 @@ def obs_layout(cfg: VCPPConfig) -> ObsLayout:
     return ObsLayout(int(cfg.obs_window), extras, int(cfg.obs_visits_cap), int(cfg.obs_teammates))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def nearest_work(coverable, views, x, y):
     """(d2, i, j) of the coverable cell not yet covered nearest to (x, y) (squared distance;
     on a tie the smallest (i, j)), or d2 = -1 when none is left. Searched ring by ring
@@ -131,7 +131,7 @@ def nearest_work(coverable, views, x, y):
     return best, bi, bj
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def observation(w, p, layout, e, out):
     """Write world e's observation (``w``: WorldArrays, ``p``: Params) into ``out[e]``."""
     blocked, coverable, views, blk_todo, blk_total = (
@@ -196,7 +196,7 @@ def observation(w, p, layout, e, out):
         _teammates(w, p, layout.teammates, e, o[k : k + N_TEAMMATE * layout.teammates])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _target(w, p, layout, e, o):
     """The obs_target block of slot e into ``o`` (3 values)."""
     coverable, views = w.coverable, w.views
@@ -224,7 +224,7 @@ def _target(w, p, layout, e, o):
         o[2] = min(d, TARGET_RANGE) / TARGET_RANGE
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _teammates(w, p, count, e, o):
     """The obs_teammates block of slot e into ``o``: its ``count`` nearest teammates still
     flying (squared distance in cells; on a tie the lower UAV number), zeros after them."""

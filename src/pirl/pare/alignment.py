@@ -20,7 +20,7 @@ import numpy as np
 from pirl.advice.recommendation import Recommendation
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _align_one(e, p_t, p_next, cam_next, rec, d_max, alpha, out):
     """Row e of ``out`` gets (dir_align, pos_align, move, cam) of world e."""
     dot = nq = ndp = dist = 0.0

@@ -69,7 +69,7 @@ WIND_DIRS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=np.int64)
 BATCH_KERNEL = {"cache": True, "_nrt": False}
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _next_uniform(rng, e):
     """splitmix64: a small counter-based generator per world, so wind is reproducible."""
     state = rng[e] + np.uint64(0x9E3779B97F4A7C15)
@@ -81,26 +81,26 @@ def _next_uniform(rng, e):
     return (z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def fleet_size(w):
     """UAVs per world (K): the slots over the worlds, read off the arrays' first axes."""
     return w.status.shape[0] // w.coverable.shape[0]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def world_of(w, e):
     """The world of slot e: the row of the shared map and coverage arrays."""
     return e // fleet_size(w)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def free(blocked, p, g, x, y, z):
     """Whether cell (x, y, z) of world g lies inside the grid and out of every obstacle."""
     inside = 0 <= x < p.size_x and 0 <= y < p.size_y and 0 <= z < p.size_z
     return inside and not blocked[g, x, y, z]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def held(w, e, x, y, z):
     """Whether a teammate of slot e that is still flying holds cell (x, y, z) (never with one
     UAV). Two UAVs never share a cell: the mask and the move read this."""
@@ -116,13 +116,13 @@ def held(w, e, x, y, z):
     return False
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def open_cell(w, p, e, x, y, z):
     """Whether slot e's UAV may fly into cell (x, y, z): free, and no teammate holds it."""
     return free(w.blocked, p, world_of(w, e), x, y, z) and not held(w, e, x, y, z)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def book_view(w, e, cells, mark_redundant):
     """Book one view of world e: the distinct ground cells (rows (i, j)) of ``cells``.
 
@@ -170,14 +170,14 @@ def book_view(w, e, cells, mark_redundant):
     return new
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def camera_pose(w, e):
     """World e's camera as a :class:`~pirl.world.footprint.CameraPose` (grid integers)."""
     st = w.status[e]
     return CameraPose(st["x"], st["y"], st["z"], st["tilt"], st["pan"], st["zoom10"])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def observe(w, p, e, mark_redundant):
     """Look from world e's current pose, book the view (:func:`book_view`); return new cells."""
     st = w.status[e]
@@ -191,7 +191,7 @@ def observe(w, p, e, mark_redundant):
     return book_view(w, e, buf[:n], mark_redundant)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def camera_action(w, e, a):
     """Apply camera action ``a`` (6-11) to world e: steps of 5 degrees, 15 degrees and 0.1
     zoom; at a limit the setting holds. Counts the camera action."""
@@ -211,7 +211,7 @@ def camera_action(w, e, a):
         st["zoom10"] = max(ZOOM_MIN10, st["zoom10"] - ZOOM_STEP10)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _work_within(w, g, cx, cy, reach, sx, sy):
     """Whether a coverable ground cell of world g not yet covered lies within ``reach`` cells
     (the square of half-width ``reach``) of (cx, cy)."""
@@ -222,7 +222,7 @@ def _work_within(w, g, cx, cy, reach, sx, sy):
     return False
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def path_to_work(w, e, x, y, z, sx, sy, reach):
     """Breadth-first search from (x, y) over the cells free at altitude z: (dx, dy) of the first
     move towards the nearest cell within ``reach`` cells of a coverable cell not yet covered
@@ -263,7 +263,7 @@ def path_to_work(w, e, x, y, z, sx, sy, reach):
     return 0, 0, -1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def action_mask(w, p, e, out):
     """Write into ``out[e]`` which of world e's 12 actions can change something.
 
@@ -305,7 +305,7 @@ def action_mask(w, p, e, out):
         out[e, way] = True
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def guard_action(w, p, e):
     """The stall guard's one action for world e now (see :func:`action_mask`), or -1 when the
     guard is off, not yet due, or finds nothing to do."""
@@ -330,7 +330,7 @@ def guard_action(w, p, e):
     return way
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def steer(w, p, e, a):
     """The action world e carries out when its policy chose ``a``: the stall guard's, while
     the guard holds (a policy that ignores the mask is steered all the same), else ``a``."""
@@ -338,7 +338,7 @@ def steer(w, p, e, a):
     return a if way < 0 else way
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def guarded(w, p, e):
     """Whether world e's next action is under the stall guard (``env.stall_guard``): its
     coverage has not grown for that many steps."""
@@ -352,7 +352,7 @@ def action_masks(w, p, worlds, out):
         action_mask(w, p, worlds[k], out)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def visit(w, e):
     """Count a visit to world e's current cell; return its curiosity term 1/sqrt(visits)."""
     st = w.status[e]
@@ -379,7 +379,7 @@ class StepOutcome(NamedTuple):
     """The curiosity term of the cell moved into (0 without a move)."""
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def close_step(w, p, e, out):
     """Book the end of world e's step (``out``, a :class:`StepOutcome`): battery, counters,
     raw reward terms, episode end. Fills ``w.terms[e]`` and ``w.flags[e]``."""
@@ -421,7 +421,7 @@ def close_step(w, p, e, out):
         w.progress[e] = st["steps"]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def park(w, e):
     """Book a step of slot e, whose UAV has left the episode: nothing happens, no reward
     term, and the slot reports its end again (each such step is an episode of one step with
@@ -437,7 +437,7 @@ def park(w, e):
     f["new_cells"] = 0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def step_fleet(w, p, g, actions):
     """Step every UAV of world g (``actions``: one per slot of the batch); return 1 when the
     world's episode ended.
@@ -490,7 +490,7 @@ def step_fleet(w, p, g, actions):
     return 1 if flying == 0 else 0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def step_one(w, p, e, a):
     """Apply action ``a`` (or the stall guard's, :func:`steer`) to world e; fill its ``terms``
     (raw reward terms) and ``flags``.

@@ -86,7 +86,7 @@ def lens_of(
     )
 
 
-paper_half_width = numba.njit(cache=True, inline="always")(grid.paper_half_width)
+paper_half_width = numba.njit(cache=True)(grid.paper_half_width)
 """The rule of :func:`pirl.config.grid.paper_half_width`, compiled for the kernels."""
 
 
