@@ -369,18 +369,20 @@ def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
 
     if (folder / FLEET_FILE).is_file():
         console.print(
-            f"flying the fleet in {folder} back from its files in PyFlyt, one UAV at a time ..."
+            f"flying the fleet in {folder} back from its files in PyFlyt, together in one "
+            f"Aviary{' with wind' if wind else ', no wind'} ..."
         )
         f = fly_fleet(folder, physics, wind, log=lambda line: console.print(line, highlight=False))
         for m in f["members"]:
             console.print(
-                f"{m['folder']}: VCR {m['vcr_alone']:.3f} flown alone (its credited cells in the "
+                f"{m['folder']}: VCR {m['vcr_own']:.3f} of its own flight (credited in the "
                 f"grid {m['vcr_grid']:.3f}), energy {m['energy_used']:.3f} of a battery (grid "
                 f"{m['energy_used_grid']:.3f}), end {m['end']}, {m['contacts']} contacts"
             )
         console.print(
             f"fleet flown: VCR {f['vcr']:.3f} (grid {f['vcr_grid']:.3f}), energy "
-            f"{f['energy_used']:.3f} batteries; wrote {folder / 'flown.json'}"
+            f"{f['energy_used']:.3f} batteries, {f['contacts_between_drones']} contacts between "
+            f"drones (closest {f['closest_approach_m']} m); wrote {folder / 'flown.json'}"
         )
         return
 

@@ -11,6 +11,7 @@ makespan, each UAV's take-off delay per wave and the closest approach
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -26,12 +27,13 @@ from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.evaluate.fleet import Team, fleet_row, team_for
-from pirl.missions.fly import fly_mission
+from pirl.missions.fly import FileFollower, flight_mission, flown_figures, read_flight
 from pirl.missions.items import Episode, Step
 from pirl.missions.separation import Separation, separate, track
 from pirl.missions.write import (
     Planned,
     check_new_folder,
+    geo_for,
     mission_source,
     plan_episode,
     staged,
@@ -222,11 +224,19 @@ def fly_fleet(
     wind: bool = True,
     log: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
-    """``pirl fly`` of a fleet's folder: every UAV's files read back and flown in PyFlyt (each
-    in an Aviary of its own, one after another: :func:`pirl.missions.fly.fly_mission`, which
-    writes each ``uav-N/flown.json``); the fleet's flown coverage is what any of them saw.
-    Writes and returns the fleet's ``flown.json``. Contacts between drones are not flown here:
-    the plan's separation in time is checked when it is written (``fleet.json``)."""
+    """``pirl fly`` of a fleet's folder: every UAV's files read back and flown together in one
+    PyFlyt ``Aviary``, one QuadX per UAV, each following its own files
+    (:class:`~pirl.missions.fly.FileFollower`) from its own home, in one wind.
+
+    Time: the drones fly at PyFlyt's pace in its scaled world (``physics.cell_size_m`` a
+    cell), so each UAV's first take-off delay of ``fleet.json`` (seconds at
+    ``mission.speed_m_s`` over the site's cells) is scaled to the same distance flown at
+    ``physics.max_speed_m_s``; its sorties are flown back to back, as a single mission is
+    flown. A UAV that has finished lands where it is. The fleet's flown coverage is what any
+    of them saw. Writes each ``uav-N/flown.json`` and the fleet's ``flown.json`` (with the
+    contacts between drones and their closest approach) and returns the fleet's figures."""
+    from pirl.physics.pyflyt_backend import PyFlytFlight
+
     folder = Path(folder)
     try:
         fleet = json.loads((folder / FLEET_FILE).read_text())
@@ -235,14 +245,34 @@ def fly_fleet(
         raise ConfigError(
             f"{folder / FLEET_FILE}: not a fleet written by pirl plan ({exc})"
         ) from None
+    physics = physics or PhysicsConfig()
+    files = [read_flight(member) for member in members]
+    missions = [flight_mission(f, physics, wind) for f in files]
+    followers = [FileFollower(f.ops) for f in files]
+    for follower, mission in zip(followers, missions, strict=True):
+        follower.reset(mission.world, 0)
+    take_off = []
+    for f in files:
+        settings = MissionSettings.from_dict(f.summary.get("mission", {}))
+        cell_m = geo_for(f.env, settings, (0, 0, 0)).georef.cell_size_m
+        delay = float((f.summary.get("takeoff_delay_s") or [0.0])[0])
+        cells = delay * settings.speed_m_s / cell_m
+        take_off.append(cells * physics.cell_size_m / physics.max_speed_m_s)
+    say = None if log is None else (lambda t: log(f"fleet flown {t:,.0f} simulated s"))
+    began = time.perf_counter()
+    with PyFlytFlight(missions) as flight:
+        together = flight.fly_fleet([f.next_action for f in followers], take_off, say)
+    wall = time.perf_counter() - began
     seen = coverable = None
     flown_members = []
-    for member in members:
-        flown = fly_mission(member, physics, wind, log)
+    for member, f, mission, follower in zip(members, files, missions, followers, strict=True):
+        flown = flown_figures(f, mission, follower, wall)
+        figures = {k: v for k, v in flown.items() if k not in ("covered", "coverable")}
+        write_atomic(member / "flown.json", json.dumps(figures, indent=1) + "\n")
         seen = flown["covered"] if seen is None else seen | flown["covered"]
         coverable = flown["coverable"]
         flown_members.append({
-            "folder": member.name, "vcr_alone": flown["vcr"], "vcr_grid": flown["vcr_grid"],
+            "folder": member.name, "vcr_own": flown["vcr"], "vcr_grid": flown["vcr_grid"],
             "energy_used": flown["energy_used"], "energy_used_grid": flown["energy_used_grid"],
             "steps": flown["steps"], "end": flown["end"], "contacts": flown["contacts"],
             "ops_skipped": flown["ops_skipped"], "sim_seconds": flown["sim_seconds"],
@@ -254,8 +284,13 @@ def fly_fleet(
         "vcr_grid": fleet.get("vcr"),
         "energy_used": round(sum(m["energy_used"] for m in flown_members), 4),
         "contacts": sum(m["contacts"] for m in flown_members),
+        "contacts_between_drones": together["contacts_between_drones"],
+        "closest_approach_m": together["closest_approach_m"],
+        "take_off_s": [round(t, 2) for t in take_off],
+        "sim_seconds": together["sim_seconds"],
+        "wall_seconds": round(wall, 1),
         "members": flown_members,
-        "between_drones": "not flown together: the separation in time is fleet.json's check",
+        "flown": "together, one PyFlyt Aviary (docs/fleets.md)",
     }
     write_atomic(folder / "flown.json", json.dumps(figures, indent=1) + "\n")
     return figures

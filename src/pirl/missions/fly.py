@@ -331,6 +331,23 @@ class FileFollower:
         return None
 
 
+def flight_mission(files: FlightFiles, physics: PhysicsConfig, wind: bool = True) -> Any:
+    """The :class:`~pirl.physics.flight.Mission` that flies ``files`` (reset on its scenario,
+    from the file's start) and the physics settings it flies under (no wind unless ``wind``)."""
+    from pirl.physics.flight import Mission, scenario_for_seed
+
+    if not wind:
+        physics = physics.replace(wind_mean=(0.0, 0.0, 0.0), wind_gust=0.0)
+    # The file is flown as written: it already holds the stall guard's moves, and a guard
+    # counting stalls on the flown coverage would steer the drone off the written route.
+    env = files.env.replace(wind_prob=0.0, stall_guard=0)
+    seed = int(files.summary.get("seed", 0))
+    scenario = dataclasses.replace(scenario_for_seed(env, seed), start=files.start)
+    mission = Mission(env, physics)
+    mission.reset(scenario=scenario)
+    return mission
+
+
 def fly_files(
     files: FlightFiles,
     physics: PhysicsConfig | None = None,
@@ -341,21 +358,11 @@ def fly_files(
     """Fly a mission read back by :func:`read_flight` in PyFlyt; the flown figures beside the
     grid episode's, and under ``"covered"`` the (X, Y) map of ground cells the flight saw.
     ``log`` gets one line per ``every_s`` wall seconds (a site's flight takes minutes)."""
-    from pirl.physics.flight import Mission, scenario_for_seed
     from pirl.physics.pyflyt_backend import PyFlytFlight
 
-    physics = physics or PhysicsConfig()
-    if not wind:
-        physics = physics.replace(wind_mean=(0.0, 0.0, 0.0), wind_gust=0.0)
-    # The file is flown as written: it already holds the stall guard's moves, and a guard
-    # counting stalls on the flown coverage would steer the drone off the written route.
-    env = files.env.replace(wind_prob=0.0, stall_guard=0)
-    seed = int(files.summary.get("seed", 0))
-    scenario = dataclasses.replace(scenario_for_seed(env, seed), start=files.start)
-    mission = Mission(env, physics)
-    mission.reset(scenario=scenario)
+    mission = flight_mission(files, physics or PhysicsConfig(), wind)
     follower = FileFollower(files.ops)
-    follower.reset(mission.world, 0, seed)
+    follower.reset(mission.world, 0)
     began = last = time.perf_counter()
     with PyFlytFlight(mission) as flight:
         while not mission.done:
@@ -370,14 +377,22 @@ def fly_files(
                 log(f"flown {mission.world.status[0]['steps']:,} steps of about "
                     f"{files.summary.get('grid_steps', '?'):,}, {mission.sim_seconds:,.0f} "
                     f"simulated s")  # fmt: skip
-    wall = time.perf_counter() - began
+    return flown_figures(files, mission, follower, time.perf_counter() - began)
+
+
+def flown_figures(
+    files: FlightFiles, mission: Any, follower: FileFollower, wall: float
+) -> dict[str, Any]:
+    """What a flight of ``files`` did (``mission`` flown, ``follower`` its ops), beside the
+    grid episode's figures; under ``"covered"`` the (X, Y) map of ground cells it saw."""
     m = mission.metrics()
     s = files.summary
+    physics = mission.physics
     return {
         "method": s.get("method"),
         "site": s.get("site"),
-        "size": list(env.size),
-        "seed": seed,
+        "size": list(files.env.size),
+        "seed": int(s.get("seed", 0)),
         "plans": files.plans,
         "items": files.items,
         "vcr": round(float(m["vcr"]), 4),
@@ -433,4 +448,13 @@ def _write(path: Path, text: str) -> None:
     write_atomic(path, text, path.with_name(f".{path.name}.{os.getpid()}.tmp"))
 
 
-__all__ = ["FileFollower", "FlightFiles", "Op", "fly_files", "fly_mission", "read_flight"]
+__all__ = [
+    "FileFollower",
+    "FlightFiles",
+    "Op",
+    "flight_mission",
+    "flown_figures",
+    "fly_files",
+    "fly_mission",
+    "read_flight",
+]

@@ -22,7 +22,7 @@ import functools
 import io
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -77,13 +77,16 @@ def _quiet() -> Iterator[None]:
 
 
 class PyFlytFlight:
-    """A PyFlyt Aviary with one QuadX and the mission's obstacles, flying its waypoints.
+    """A PyFlyt Aviary with one QuadX per mission and the first mission's obstacles.
 
-    Build it after ``mission.reset()``; ``fly(mission)`` flies the current step to its end.
+    Build it after every ``mission.reset()``; ``fly(mission)`` flies the first drone's current
+    step to its end; :meth:`fly_fleet` flies several drones together, each its own mission
+    (the missions of one fleet: the same world, their own starts).
     """
 
-    def __init__(self, mission: Mission) -> None:
-        if mission.scenario is None:
+    def __init__(self, mission: Mission | Sequence[Mission]) -> None:
+        missions = [mission] if isinstance(mission, Mission) else list(mission)
+        if any(m.scenario is None for m in missions):
             raise RuntimeError("reset the mission before building its flight")
         with _quiet():
             import pybullet
@@ -91,9 +94,11 @@ class PyFlytFlight:
 
             from pirl.physics.wind import GustWind
 
-        p = mission.physics
+        first = missions[0]
+        p = first.physics
         self.physics = p
-        wind_seq, noise_seq = np.random.SeedSequence(mission.scenario.wind_seed).spawn(2)
+        self.missions = missions
+        wind_seq, noise_seq = np.random.SeedSequence(first.scenario.wind_seed).spawn(2)
         windy = any(p.wind_mean) or p.wind_gust > 0
         wind_options: dict[str, Any] = {}
         if windy:
@@ -103,11 +108,11 @@ class PyFlytFlight:
                 "gust_period_s": p.gust_period_s,
                 "seed": int(wind_seq.generate_state(1)[0]),
             }
-        start = mission.cell_position(mission.start)
+        starts = np.stack([m.cell_position(m.start) for m in missions])
         with _quiet():
             self.aviary = Aviary(
-                start_pos=start[None, :],
-                start_orn=np.zeros((1, 3)),
+                start_pos=starts,
+                start_orn=np.zeros((len(missions), 3)),
                 drone_type="quadx",
                 drone_options={"control_hz": p.control_hz},
                 wind_type=GustWind if windy else None,
@@ -121,21 +126,23 @@ class PyFlytFlight:
             bound = functools.partial(getattr(pybullet, name), physicsClientId=av._client)
             av.__dict__[name] = bound
         av.__dict__["LINK_FRAME"] = pybullet.LINK_FRAME
-        self.drone = drone = av.drones[0]
-        # A stiffer, faster position loop than the cf2x defaults (1/s, 2 m/s): one-cell hops
-        # in about 1.3 s instead of 2, with leans still under 20 degrees.
-        drone.Kp_lin_pos = np.array([p.position_gain, p.position_gain])
-        drone.lim_lin_pos = np.array([p.max_speed_m_s, p.max_speed_m_s])
+        self.drones = list(av.drones)
+        self.drone = self.drones[0]
+        for drone in self.drones:
+            # A stiffer, faster position loop than the cf2x defaults (1/s, 2 m/s): one-cell
+            # hops in about 1.3 s instead of 2, with leans still under 20 degrees.
+            drone.Kp_lin_pos = np.array([p.position_gain, p.position_gain])
+            drone.lim_lin_pos = np.array([p.max_speed_m_s, p.max_speed_m_s])
         self.dt = float(av.step_period)
 
         self.sphere_ids = []
-        for cx, cy, cz, r in mission.obstacle_spheres_m():
+        for cx, cy, cz, r in first.obstacle_spheres_m():
             shape = av.createCollisionShape(pybullet.GEOM_SPHERE, radius=float(r))
             body = av.createMultiBody(
                 baseMass=0.0, baseCollisionShapeIndex=shape, basePosition=[cx, cy, cz]
             )
             self.sphere_ids.append(body)
-        for row in mission.obstacle_boxes_m():  # a site: its buildings, merged into boxes
+        for row in first.obstacle_boxes_m():  # a site: its buildings, merged into boxes
             shape = av.createCollisionShape(
                 pybullet.GEOM_BOX, halfExtents=[float(v) for v in row[3:]]
             )
@@ -147,66 +154,143 @@ class PyFlytFlight:
             self.sphere_ids.append(body)
         av.register_all_new_bodies()
         self._spheres = np.array(self.sphere_ids, dtype=np.int64)
+        self._ids = np.array([d.Id for d in self.drones], dtype=np.int64)
 
         # Hover throttle: total thrust m g shared by 4 rotors of thrust coef * (throttle*rpm)^2.
+        drone = self.drone
         uid = drone.Id
         mass = sum(av.getDynamicsInfo(uid, link)[0] for link in range(-1, av.getNumJoints(uid)))
         max_thrust = float(drone.motors.thrust_coef.ravel()[0] * drone.motors.max_rpm[0] ** 2)
         self.hover_throttle = float(np.sqrt(mass * _GRAVITY / (4 * max_thrust)))
-        self._hold()
-        self._set_target(start)
+        self._setpoints: list[np.ndarray | None] = [None] * len(self.drones)
+        for i in range(len(self.drones)):
+            self._hold(i)
+            self._set_target(starts[i], i)
 
-    def _hold(self) -> None:
-        """Position mode, holding where the drone is, trimmed for hover.
+    def _hold(self, i: int = 0) -> None:
+        """Position mode, holding where drone ``i`` is, trimmed for hover.
 
         PyFlyt's altitude loop builds the hover thrust in its integrator from zero, so a drone
         switched to position mode sags by about 9 cm and needs some 10 s to climb back.
         Starting the integrator at the hover throttle (the steady-state thrust command) is
         the trim a real flight controller carries.
         """
-        self.drone.set_mode(7)
-        self.drone.z_PIDs[0]._integral = np.array([self.hover_throttle])
-        self._setpoint = None
+        drone = self.drones[i]
+        drone.set_mode(7)
+        drone.z_PIDs[0]._integral = np.array([self.hover_throttle])
+        self._setpoints[i] = None
 
-    def _set_target(self, position: np.ndarray) -> None:
-        if self._setpoint is None or not np.array_equal(self._setpoint, position):
-            self._setpoint = np.array(position, dtype=np.float64)
-            x, y, z = self._setpoint
-            self.aviary.set_setpoint(0, np.array([x, y, 0.0, z]))
+    def _set_target(self, position: np.ndarray, i: int = 0) -> None:
+        if self._setpoints[i] is None or not np.array_equal(self._setpoints[i], position):
+            self._setpoints[i] = np.array(position, dtype=np.float64)
+            x, y, z = self._setpoints[i]
+            self.aviary.set_setpoint(i, np.array([x, y, 0.0, z]))
 
-    def pose(self) -> Pose:
-        """The drone's pose now (position metres, roll/pitch/yaw radians)."""
-        state = self.drone.state
+    def pose(self, i: int = 0) -> Pose:
+        """Drone ``i``'s pose now (position metres, roll/pitch/yaw radians)."""
+        state = self.drones[i].state
         return Pose(state[3].copy(), state[1].copy())
 
-    def fly(self, mission: Mission) -> Pose:
-        """Fly the mission's current step until it is over; returns the final pose."""
-        av, drone = self.aviary, self.drone
+    def _flown(self, mission: Mission, i: int, contacts: np.ndarray) -> tuple[Pose, bool]:
+        """After a physics step: drone ``i``'s pose (put back if it tumbled or touched the
+        ground), and whether its mission's step is over."""
+        drone = self.drones[i]
         limit = np.radians(self.physics.recover_tilt_deg)
         # Thrust grows as rotor speed squared: the real drone's top speed relative to hover.
         top_speed = float(np.sqrt(self.physics.max_thrust_to_weight))
+        pose = self.pose(i)
+        power = normalized_power(drone.motors.throttle / self.hover_throttle, top_speed)
+        touched = bool(len(self._spheres) and contacts[drone.Id, self._spheres].any())
+        if np.abs(pose.rpy[:2]).max() > limit or contacts[drone.Id, self.aviary.planeId]:
+            self._recover(mission, i)
+            pose = self.pose(i)
+        if not mission.update(self.dt, pose, power, touched):
+            return pose, False
+        if mission.timed_out and (touched or mission.in_obstacle(pose)):
+            # Wedged against a sphere at full thrust: it would stay there for every later
+            # step (the issue's 4 timeouts in a row). A crash: put it back.
+            self._recover(mission, i)
+            pose = self.pose(i)
+        return pose, True
+
+    def fly(self, mission: Mission) -> Pose:
+        """Fly the mission's current step (the first drone's) until it is over; returns the
+        final pose."""
         while True:
             self._set_target(mission.target_position())
-            av.step()
-            contacts = av.contact_array
-            pose = self.pose()
-            power = normalized_power(drone.motors.throttle / self.hover_throttle, top_speed)
-            touched = bool(len(self._spheres) and contacts[drone.Id, self._spheres].any())
-            if np.abs(pose.rpy[:2]).max() > limit or contacts[drone.Id, av.planeId]:
-                self._recover(mission)
-                pose = self.pose()
-            if mission.update(self.dt, pose, power, touched):
-                if mission.timed_out and (touched or mission.in_obstacle(pose)):
-                    # Wedged against a sphere at full thrust: it would stay there for every
-                    # later step (the issue's 4 timeouts in a row). A crash: put it back.
-                    self._recover(mission)
-                    pose = self.pose()
+            self.aviary.step()
+            pose, over = self._flown(mission, 0, self.aviary.contact_array)
+            if over:
                 return pose
 
-    def _recover(self, mission: Mission) -> None:
+    def fly_fleet(
+        self,
+        actions: Sequence[Callable[[], int | None]],
+        take_off_s: Sequence[float],
+        log: Callable[[float], Any] | None = None,
+    ) -> dict[str, Any]:
+        """Fly every drone's mission together until each has run out of actions or ended.
+
+        ``actions[i]()`` gives drone ``i``'s next grid action (None: it has finished). Drone
+        ``i`` hovers at its start until ``take_off_s[i]`` simulated seconds have passed; a
+        drone that has finished lands where it is (PyFlyt cannot take a body out of the
+        world), so teammates pass over it as they would over a drone on the ground. Returns
+        the contacts between drones (pairs that touched, counted when they start touching)
+        and the closest approach of two drones in the air. ``log`` gets the simulated time
+        about every 60 s of it.
+        """
+        av, missions = self.aviary, self.missions
+        k = len(missions)
+        state = ["waiting"] * k
+        t, logged = 0.0, 0.0
+        touching = np.zeros((k, k), dtype=bool)
+        between, closest = 0, np.inf
+        while any(s != "done" for s in state):
+            for i in range(k):
+                if state[i] == "waiting" and t >= take_off_s[i] - 1e-9:
+                    state[i] = self._next(missions[i], actions[i], i)
+                if state[i] == "flying":
+                    self._set_target(missions[i].target_position(), i)
+            av.step()
+            t += self.dt
+            contacts = av.contact_array
+            pair = contacts[np.ix_(self._ids, self._ids)] & ~np.eye(k, dtype=bool)
+            between += int((pair & ~touching).sum()) // 2
+            touching = pair
+            up = [i for i in range(k) if state[i] != "done"]
+            if len(up) > 1:
+                at = np.array([self.drones[i].state[3] for i in up])
+                gaps = np.linalg.norm(at[:, None] - at[None, :], axis=-1)
+                closest = min(closest, float(gaps[np.triu_indices(len(up), 1)].min()))
+            for i in range(k):
+                if state[i] == "flying":
+                    pose, over = self._flown(missions[i], i, contacts)
+                    if over:
+                        missions[i].end_step(pose)
+                        state[i] = self._next(missions[i], actions[i], i)
+            if log is not None and t - logged >= 60.0:
+                logged = t
+                log(t)
+        return {
+            "contacts_between_drones": between,
+            "closest_approach_m": None if not np.isfinite(closest) else round(closest, 3),
+            "sim_seconds": round(t, 1),
+        }
+
+    def _next(self, mission: Mission, action: Callable[[], int | None], i: int) -> str:
+        """Begin drone ``i``'s next step; "done" (and land it) when it has none left."""
+        a = None if mission.done else action()
+        if a is not None:
+            mission.begin_step(a)
+            return "flying"
+        here = self.pose(i).position
+        self._set_target(np.array([here[0], here[1], 0.0]), i)
+        return "done"
+
+    def _recover(self, mission: Mission, i: int = 0) -> None:
         """Put a tumbled, grounded or wedged drone back, level and still, at its last cell's
         centre."""
-        av, drone = self.aviary, self.drone
+        av, drone = self.aviary, self.drones[i]
         plan = mission.plan
         cell = plan.origin if plan is not None else mission.start
         position = mission.cell_position(cell)
@@ -214,7 +298,7 @@ class PyFlytFlight:
         av.resetBaseVelocity(drone.Id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
         drone.motors.throttle[:] = self.hover_throttle
         drone.update_state()
-        self._hold()  # fresh controller state
+        self._hold(i)  # fresh controller state
         mission.note_recovery()
 
     def close(self) -> None:
