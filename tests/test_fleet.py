@@ -244,6 +244,27 @@ def test_pirl_refuses_fleet_training_in_one_line():
         RunConfig().with_overrides(train={"uavs": [0]})
 
 
+def test_pirl_train_takes_uavs_and_refuses_them_for_pirl_without_a_folder(tmp_path):
+    """``pirl train --uavs 1,2`` sets train.uavs of a PPO method's run; PIRL is refused in one
+    line before any folder is made."""
+    import subprocess
+    import sys
+
+    def pirl(*args: str) -> subprocess.CompletedProcess:
+        cmd = [sys.executable, "-m", "pirl", "train", "--config", "test", *args]
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+
+    proc = pirl("--method", "pirl", "--uavs", "2", "--out", str(tmp_path / "p"))
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert "train.uavs=[2]: PIRL's advice" in " ".join(proc.stderr.split())
+    assert not (tmp_path / "p").exists()
+    run = tmp_path / "e"
+    proc = pirl("--method", "ppo-ewri", "--uavs", "1,2", "--steps", "1024", "--out", str(run))
+    assert proc.returncode == 0, proc.stderr
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["complete"] and "uavs:\n  - 1\n  - 2" in (run / "config.yaml").read_text()
+
+
 def test_a_fleets_gif_draws_every_step(tmp_path):
     from pirl.agents.boustrophedon import BoustrophedonPolicy
     from pirl.config.world import VCPPConfig

@@ -162,6 +162,13 @@ def train(
     site: Annotated[
         Path | None, typer.Option(help="Train on a site folder (docs/sites.md): its seeded starts.")
     ] = None,
+    uavs: Annotated[
+        list[int] | None,
+        uavs_option(
+            "Fleet sizes to train with (train.uavs; PPO methods): one policy shared by every "
+            "UAV of worlds of each size (docs/fleets.md)."
+        ),
+    ] = None,
 ) -> None:
     """Train one method into a run folder (checkpoints, TensorBoard logs, metrics CSV)."""
     from pirl.agents.runs import train_run
@@ -171,7 +178,7 @@ def train(
         result = train_run(
             method, out, config, "quick",
             steps=steps, seed=seed, advisor=advisor, expert=expert, resume=resume,
-            student=student, site=site,
+            student=student, site=site, uavs=uavs,
         )  # fmt: skip
     except (TrainingInterrupted, TrainingStopped) as stop:
         raise training_ended(stop) from None

@@ -16,7 +16,7 @@ from typing import Any
 from pirl.advice.registry import advisor_kind
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
 from pirl.agents.run_folder import RunFolder
-from pirl.agents.settings import method_config, resolve_settings
+from pirl.agents.settings import check_fleet_training, method_config, resolve_settings
 from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
@@ -78,10 +78,12 @@ def train_run(
     resume: bool = False,
     student: Path | None = None,
     site: Path | None = None,
+    uavs: list[int] | None = None,
 ) -> Path:
     """``pirl train``: train (or resume) ``method`` into run folder ``out``; returns the model.
 
     ``site``: train on that site folder's map and seeded starts instead of generated worlds.
+    ``uavs``: the fleet sizes to train with (``train.uavs``; one policy shared by every UAV).
 
     The settings come from :func:`~pirl.agents.settings.resolve_settings`: the preset (name
     or file) ``config``; without one, a resumed run's own config.yaml, else
@@ -100,10 +102,12 @@ def train_run(
         seed = own.seed if resume else 0
     cfg = resolve_settings(
         config, default=default_config, run=own.path if resume else None, method=method,
-        overrides={"train": {"total_steps": steps} if steps is not None else {},
+        overrides={"train": {**({"total_steps": steps} if steps is not None else {}),
+                             **({"uavs": list(uavs)} if uavs else {})},
                    "pare": {"advisor": advisor} if advisor is not None else {}},
         site=site,
     )  # fmt: skip
+    check_fleet_training(cfg, entry.advised)
     if entry.advised:
         advisor_kind(cfg.pare.advisor).check_key(cfg)
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)

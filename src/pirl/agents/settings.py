@@ -84,4 +84,20 @@ def resolve_settings(
     return cfg
 
 
-__all__ = ["check_budgets", "method_config", "method_steps", "resolve_settings"]
+def check_fleet_training(cfg: RunConfig, advised: bool) -> None:
+    """Refuse fleets in training (``train.uavs`` other than [1]) for an advised method: PIRL's
+    advice is asked about one UAV."""
+    if advised and tuple(cfg.train.uavs) != (1,):
+        raise ConfigError(
+            f"train.uavs={list(cfg.train.uavs)}: PIRL's advice is asked about one UAV; "
+            "train it with train.uavs [1] and fly it in a fleet with pirl evaluate --uavs"
+        )
+
+
+__all__ = [
+    "check_budgets",
+    "check_fleet_training",
+    "method_config",
+    "method_steps",
+    "resolve_settings",
+]

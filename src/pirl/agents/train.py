@@ -44,6 +44,7 @@ from pirl.agents.run_folder import (
     train_seed_base,
 )
 from pirl.agents.schedules import learning_rate_of
+from pirl.agents.settings import check_fleet_training
 from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import ConfigError
@@ -163,11 +164,7 @@ def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str =
     if cfg.train.uavs != (1,):
         from pirl.env.fleet import MixedFleetVecEnv
 
-        if advice is not None:
-            raise ConfigError(
-                f"train.uavs={list(cfg.train.uavs)}: PIRL's advice is asked about one UAV; "
-                "train it with train.uavs [1] and fly it in a fleet with pirl evaluate --uavs"
-            )
+        check_fleet_training(cfg, advised=advice is not None)
         venv = MixedFleetVecEnv(
             cfg.ppo.n_envs, training_env(cfg), cfg.train.uavs, seed=train_seed_base(seed)
         )
