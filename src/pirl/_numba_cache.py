@@ -19,7 +19,6 @@ from pirl._paths import cache_root
 
 _KERNEL_PACKAGES = ("world", "env", "pare", "physics")
 _KEEP = 3
-_folder: Path | None = None
 
 
 def configure() -> Path | None:
@@ -40,8 +39,6 @@ def configure() -> Path | None:
         return None  # read-only home: numba falls back to compiling in memory
     numba.config.CACHE_DIR = str(folder)
     _prune(base, folder)
-    global _folder
-    _folder = folder
     return folder
 
 
@@ -53,12 +50,14 @@ def compiling() -> Iterator[None]:
     workers, test workers) each compile every kernel (about 25 CPU-s for the step kernels).
     Under this lock the first compiles and writes the cache; the others wait, then load it.
     """
-    if _folder is None:
-        yield
-        return
+    import numba
     from filelock import FileLock
 
-    with FileLock(str(_folder / ".compile.lock")):
+    folder = numba.config.CACHE_DIR  # configure()'s folder; empty when it could not make one
+    if not folder:
+        yield
+        return
+    with FileLock(str(Path(folder) / ".compile.lock")):
         yield
 
 

@@ -27,7 +27,13 @@ from pirl.config.run import RunConfig
 from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore
 from pirl.evaluate.fleet import Team, fleet_row, team_for
-from pirl.missions.fly import FileFollower, flight_mission, flown_figures, read_flight
+from pirl.missions.fly import (
+    FileFollower,
+    flight_mission,
+    flown_figures,
+    read_flight,
+    write_flown,
+)
 from pirl.missions.items import Episode, Step
 from pirl.missions.separation import Separation, separate, track
 from pirl.missions.write import (
@@ -267,8 +273,7 @@ def fly_fleet(
     flown_members = []
     for member, f, mission, follower in zip(members, files, missions, followers, strict=True):
         flown = flown_figures(f, mission, follower, wall)
-        figures = {k: v for k, v in flown.items() if k not in ("covered", "coverable")}
-        write_atomic(member / "flown.json", json.dumps(figures, indent=1) + "\n")
+        write_flown(member, flown)
         seen = flown["covered"] if seen is None else seen | flown["covered"]
         coverable = flown["coverable"]
         flown_members.append({

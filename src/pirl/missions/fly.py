@@ -431,9 +431,14 @@ def fly_mission(
     beside them (atomically)."""
     files = folder if isinstance(folder, FlightFiles) else read_flight(folder)
     flown = fly_files(files, physics, wind, log)
-    figures = {k: v for k, v in flown.items() if k not in ("covered", "coverable")}
-    _write(files.folder / "flown.json", json.dumps(figures, indent=1) + "\n")
+    write_flown(files.folder, flown)
     return flown
+
+
+def write_flown(folder: Path, flown: dict[str, Any]) -> None:
+    """Write a flight's figures (its maps left out) to ``folder/flown.json``, atomically."""
+    figures = {k: v for k, v in flown.items() if k not in ("covered", "coverable")}
+    _write(folder / "flown.json", json.dumps(figures, indent=1) + "\n")
 
 
 def _write(path: Path, text: str) -> None:
@@ -457,4 +462,5 @@ __all__ = [
     "fly_files",
     "fly_mission",
     "read_flight",
+    "write_flown",
 ]
