@@ -7,6 +7,9 @@ places; `campus` is placed on the Earth so that its files carry real coordinates
 - ``village``: a 128 x 128 grey PNG of heights (0.25 m per grey level, 4 m cells) with an
   origin, streets of houses and a start zone.
 - ``town``: 256 x 256 cells and 8 levels, not georeferenced: the scale benchmark's site.
+- ``hills``: a 48 x 40 DTM and DSM (5 m cells, UTM zone 33N in Styria), metres above sea level:
+  a valley between a ridge and a slope, a copse and three buildings on the DSM, an area and a
+  no-fly zone in longitude/latitude. Levels follow the terrain.
 """
 
 from __future__ import annotations
@@ -17,6 +20,29 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+
+
+def _write_tif(
+    path: Path, values: np.ndarray, crs: str, west: float, north: float, cell: float
+) -> None:
+    import rasterio
+    from rasterio.transform import from_origin
+
+    rows, cols = values.shape
+    with rasterio.open(
+        path, "w", driver="GTiff", width=cols, height=rows, count=1, dtype="float32", crs=crs,
+        transform=from_origin(west, north, cell, cell),
+    ) as dst:  # fmt: skip
+        dst.write(values.astype(np.float32), 1)
+        dst.update_tags(1, units="m")
+        dst.units = ("m",)
+
+
+def _feature(to_ll, e0: float, n0: float, e1: float, n1: float) -> dict:
+    ring = [(e0, n0), (e1, n0), (e1, n1), (e0, n1), (e0, n0)]
+    coords = [list(to_ll.transform(e, n)) for e, n in ring]
+    geometry = {"type": "Polygon", "coordinates": [coords]}
+    return {"type": "Feature", "properties": {}, "geometry": geometry}
 
 
 def campus() -> None:
@@ -42,14 +68,11 @@ def campus() -> None:
         dst.write(h, 1)
     to_ll = Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True)
 
-    def polygon(e0: float, n0: float, e1: float, n1: float) -> dict:
-        ring = [(e0, n0), (e1, n0), (e1, n1), (e0, n1), (e0, n0)]
-        coords = [list(to_ll.transform(e, n)) for e, n in ring]
-        return {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [coords]}}
-
     south = north - rows * cell
-    area = polygon(west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
-    no_fly = polygon(west + 36 * cell, south + 30 * cell, west + 47 * cell, south + 39 * cell)
+    area = _feature(to_ll, west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
+    no_fly = _feature(
+        to_ll, west + 36 * cell, south + 30 * cell, west + 47 * cell, south + 39 * cell
+    )
     for name, feat in (("area", area), ("no_fly", no_fly)):
         (out / f"{name}.geojson").write_text(
             json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
@@ -63,6 +86,52 @@ def campus() -> None:
         "area: area.geojson        # longitude/latitude\n"
         "no_fly: no_fly.geojson    # a helipad corner\n"
         "start: [3, 3]\n"
+    )
+
+
+def hills() -> None:
+    from pyproj import Transformer
+
+    out = HERE / "hills"
+    out.mkdir(exist_ok=True)
+    cols, rows, cell = 48, 40, 5.0
+    x = (np.arange(cols) + 0.5) * cell  # metres east of the west edge
+    y = (rows - np.arange(rows) - 0.5) * cell  # metres north of the south edge (row 0 north)
+    ex, ny = np.meshgrid(x, y)
+    # A valley floor at 300 m, a ridge up to 35 m high running north-south 170 m east (at most
+    # about 34 degrees steep), the ground rising 20 m towards the west, a gentle fall south.
+    dtm = (
+        300.0
+        + 35.0 * np.exp(-(((ex - 170.0) / 45.0) ** 2)) * (0.7 + 0.3 * ny / (rows * cell))
+        + 20.0 * np.clip((60.0 - ex) / 60.0, 0.0, None) ** 1.5
+        + 0.04 * ny
+    )
+    dsm = dtm.copy()
+    dsm[6:14, 28:33] += 11.0  # a copse on the ridge's west flank
+    for r0, c0, h in ((26, 8, 8.0), (30, 20, 12.0), (12, 40, 15.0)):  # three buildings
+        dsm[r0 : r0 + 4, c0 : c0 + 5] = dtm[r0 : r0 + 4, c0 : c0 + 5].max() + h
+    west, north = 530_000.0, 5_210_000.0
+    crs = "EPSG:32633"
+    _write_tif(out / "dtm.tif", dtm, crs, west, north, cell)
+    _write_tif(out / "dsm.tif", dsm, crs, west, north, cell)
+    to_ll = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+    south = north - rows * cell
+    area = _feature(to_ll, west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
+    no_fly = _feature(to_ll, west + 40 * cell, south + 1 * cell, west + 47 * cell, south + 8 * cell)
+    for name, feat in (("area", area), ("no_fly", no_fly)):
+        (out / f"{name}.geojson").write_text(
+            json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
+        )
+    (out / "site.yaml").write_text(
+        "# An invented hillside: DTM and DSM, metres above sea level (UTM 33N): docs/sites.md\n"
+        "name: hills\n"
+        "terrain: dtm.tif          # bare ground, 300-345 m above sea level, 5 m pixels\n"
+        "surface: dsm.tif          # ground plus a copse and three buildings\n"
+        "level_height_m: 5.0       # levels fly 5, 10, 15 and 20 m above the terrain\n"
+        "levels: 4\n"
+        "area: area.geojson        # longitude/latitude\n"
+        "no_fly: no_fly.geojson    # a mast's corner\n"
+        "start: [10, 20]\n"
     )
 
 
@@ -126,3 +195,4 @@ if __name__ == "__main__":
     campus()
     village()
     town()
+    hills()

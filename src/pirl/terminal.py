@@ -467,6 +467,18 @@ def print_site_report(report: dict[str, Any], reasons: dict[str, str]) -> None:
     for reason, count in report["unseeable"].items():
         if count:
             console.print(f"  {count:,} cannot be seen: {reasons[reason]}")
+    lo, hi = report["elevation_m"]
+    console.print(f"ground: {report['ground']}")
+    if hi > lo:
+        console.print(
+            f"  {lo:g}-{hi:g} m above sea level, slope {report['slope_deg']['mean']:g} deg "
+            f"mean, {report['slope_deg']['max']:g} max"
+        )
+    g0, g1 = report["gsd_cm_per_px"]
+    h0, h1 = report["height_above_seen_ground_m"]
+    console.print(
+        f"ground sample distance {g0:.2f}-{g1:.2f} cm/px, {h0:g}-{h1:g} m above the ground seen"
+    )
     if "picture" in report:
         console.print(f"wrote {report['picture']}")
 

@@ -47,11 +47,19 @@ class MissionSettings(Settings, section="mission"):
     """The longest a UAV's take-off may be held back for its separation before the plan is
     refused."""
 
+    sensor_width_mm: float = 13.2
+    """The camera's sensor width (default: a 1-inch 20 MP camera, 13.2 mm) for the ground
+    sample distance ``pirl site check`` reports."""
+    focal_length_mm: float = 8.8
+    """The lens's focal length at zoom 1."""
+    image_width_px: int = 5472
+    """Pixels across the image."""
+
     def validate(self) -> None:
         """Positive speeds, times and sizes; a reserve in [0, 1); ordered altitude limits."""
         self.require_positive(
             "speed_m_s", "climb_m_s", "battery_s", "max_items", "cell_size_m", "level_height_m",
-            "check_every_s",
+            "check_every_s", "sensor_width_mm", "focal_length_mm", "image_width_px",
         )  # fmt: skip
         for key in ("separation_m", "max_delay_s"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):

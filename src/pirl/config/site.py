@@ -1,7 +1,8 @@
 """Settings of a site: the ``site.yaml`` of a site folder (docs/sites.md).
 
-A site is a real place to cover: a raster of obstacle heights, the area to cover, no-fly
-zones and where the UAV starts. Files named here are relative to the site folder.
+A site is a real place to cover: a raster of obstacle heights (or a terrain and a surface
+model in metres above sea level), the area to cover, no-fly zones and where the UAV
+starts. Files named here are relative to the site folder.
 :mod:`pirl.world.site` turns these settings into the voxel grids of a world.
 """
 
@@ -27,7 +28,23 @@ class SiteSettings(Settings, section="site"):
     heights: str = ""
     """Raster of obstacle heights above ground, metres: ``.png`` (grey value times
     ``height_scale_m``), ``.csv``, ``.npy`` or a GeoTIFF ``.tif`` (its CRS and transform
-    georeference the site). Row 0 is the north edge. Required."""
+    georeference the site). Row 0 is the north edge. Required unless ``terrain`` or
+    ``surface`` is given."""
+    terrain: str = ""
+    """GeoTIFF of the bare ground (a DTM), metres above sea level, in any metric CRS: read onto
+    the site's grid with rasterio (bilinear). Levels then follow it: level z flies
+    (z + 1) x ``level_height_m`` above the terrain under the UAV (docs/sites.md)."""
+    surface: str = ""
+    """GeoTIFF of the surface (a DSM: ground plus trees and buildings), metres above sea level,
+    in any metric CRS, read onto the grid taking the highest pixel (an obstacle never shrinks).
+    With ``terrain``, obstacles are ``surface - terrain``; alone, the terrain is estimated from
+    it (a grey-scale opening over ``ground_window_m``). Not with ``heights``."""
+    min_obstacle_m: float = 1.0
+    """Surface above the terrain by less than this is ground, not an obstacle (DEM noise,
+    grass, cars)."""
+    ground_window_m: float = 40.0
+    """A DSM without a DTM: the width of the opening that estimates the ground; wider than
+    the widest building, narrower than the narrowest hill top."""
     height_scale_m: float = 1.0
     """PNG rasters: metres per grey level."""
     pixel_size_m: float = 0.0
@@ -62,11 +79,24 @@ class SiteSettings(Settings, section="site"):
 
     def validate(self) -> None:
         """Files with known suffixes, positive sizes, a (lat, lon) origin, a known start."""
-        if not self.heights:
-            raise ConfigError("site.heights is missing: name the height raster (docs/sites.md)")
-        if not self.heights.lower().endswith(RASTER_SUFFIXES):
+        if not (self.heights or self.terrain or self.surface):
+            raise ConfigError(
+                "site.heights is missing: name the height raster, or a terrain or surface "
+                "model (docs/sites.md)"
+            )
+        if self.heights and not self.heights.lower().endswith(RASTER_SUFFIXES):
             raise self.refuse("heights", f"expected one of {', '.join(RASTER_SUFFIXES)}")
-        for key in ("height_scale_m", "pixel_size_m", "cell_size_m", "level_height_m"):
+        if self.heights and self.surface:
+            raise self.refuse(
+                "surface", "give heights (obstacles above the ground) or surface, not both"
+            )
+        for key in ("terrain", "surface"):
+            if getattr(self, key) and not getattr(self, key).lower().endswith((".tif", ".tiff")):
+                raise self.refuse(key, "expected a GeoTIFF (.tif or .tiff) with a CRS")
+        for key in (
+            "height_scale_m", "pixel_size_m", "cell_size_m", "level_height_m", "min_obstacle_m",
+            "ground_window_m",
+        ):  # fmt: skip
             value = getattr(self, key)
             if not (math.isfinite(value) and value >= 0):
                 raise self.refuse(key, "must be a number >= 0")

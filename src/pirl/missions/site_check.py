@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 
 from pirl._atomic import replacing
+from pirl.config.grid import ZOOM_RANGE
+from pirl.config.mission import MissionSettings
 from pirl.config.world import VCPPConfig
 from pirl.world.seeable import REASONS, Seeability, analyse, lens_for
 from pirl.world.site import Site, load_site
@@ -28,6 +30,50 @@ COLOURS = {
     "unreachable": (120, 40, 160),
     "no_fly_unseen": (255, 160, 0),
 }
+
+
+def gsd_cm(height_m: float | np.ndarray, zoom: float, m: MissionSettings) -> float | np.ndarray:
+    """Ground sample distance, centimetres per pixel, of a nadir photo from ``height_m`` above
+    the ground at ``zoom`` (the focal length times the zoom)."""
+    return 100.0 * m.sensor_width_mm * height_m / (m.focal_length_mm * zoom * m.image_width_px)
+
+
+def ground_report(site: Site, m: MissionSettings) -> dict[str, Any]:
+    """The ground's figures: elevation range, slope and the ground sample distance range.
+
+    The camera flies ``(z + 1) x level_height_m`` above the terrain under it; the ground it
+    sees beside that cell lies higher or lower by up to the terrain's fall to the
+    neighbouring cells, so the heights above the seen ground span the lowest level less the
+    largest rise to a neighbour, to the highest level plus the largest fall.
+    """
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from pirl.world.terrain import slope_deg
+
+    t = site.terrain
+    area = site.area
+    slope = slope_deg(t, site.georef.cell_size_m)
+    rise = float((maximum_filter(t, size=3, mode="nearest") - t)[area].max())
+    fall = float((t - minimum_filter(t, size=3, mode="nearest"))[area].max())
+    level = site.level_height_m
+    low = max(level - rise, 0.5)  # a camera never closer than half a metre, for the figure
+    high = site.size[2] * level + fall
+    return {
+        "ground": site.ground,
+        "elevation_m": [round(float(t[area].min()), 2), round(float(t[area].max()), 2)],
+        "slope_deg": {
+            "mean": round(float(slope[area].mean()), 2),
+            "max": round(float(slope[area].max()), 2),
+        },
+        "height_above_seen_ground_m": [round(low, 2), round(high, 2)],
+        "gsd_cm_per_px": [
+            round(float(gsd_cm(low, ZOOM_RANGE[1], m)), 3),
+            round(float(gsd_cm(high, ZOOM_RANGE[0], m)), 3),
+        ],
+        "camera": f"{m.sensor_width_mm:g} mm sensor, {m.focal_length_mm:g} mm lens at zoom 1, "
+        f"{m.image_width_px} px across (mission.sensor_width_mm, focal_length_mm, "
+        "image_width_px)",
+    }
 
 
 def check_site(path: str | Path, env: VCPPConfig | None = None) -> tuple[Site, Seeability, dict]:
@@ -56,6 +102,7 @@ def check_site(path: str | Path, env: VCPPConfig | None = None) -> tuple[Site, S
         "reachable_cells": int(seen.reachable.sum()),
         "free_cells": int(free.sum()),
         "usable": bool(seen.seeable.any()),
+        **ground_report(site, MissionSettings()),
     }
     return site, seen, report
 
@@ -114,4 +161,12 @@ def site_report(
     return report
 
 
-__all__ = ["COLOURS", "REASON_TEXT", "check_site", "picture", "site_report"]
+__all__ = [
+    "COLOURS",
+    "REASON_TEXT",
+    "check_site",
+    "gsd_cm",
+    "ground_report",
+    "picture",
+    "site_report",
+]

@@ -126,6 +126,16 @@ class Mission:
     """One episode's grid-level state, advanced by a physics backend (see the module doc)."""
 
     def __init__(self, env_cfg: VCPPConfig, physics: PhysicsConfig | None = None) -> None:
+        if env_cfg.site:
+            from pirl.world.site import load_site
+
+            site = load_site(env_cfg.site)
+            if site.has_terrain:
+                # PyFlyt's world here is flat ground with boxes: a hill would be flown as air.
+                raise ConfigError(
+                    f"site {site.name} has a terrain model: the physics simulation flies flat "
+                    "ground only (fly its mission in your own simulator; docs/sites.md)"
+                )
         self.cfg = env_cfg
         self.physics = physics or PhysicsConfig()
         self.world = WorldBatch(env_cfg, 1)

@@ -10,6 +10,10 @@ y north, z the flight level:
   with ``site.roofs``);
 - ``starts``: the cells episodes start from.
 
+With a terrain or surface model (:mod:`pirl.world.terrain`) the levels follow the ground:
+level z over a cell flies (z + 1) x ``level_height_m`` above that cell's terrain, and
+``heights`` holds the obstacles above it; a flat site has ``terrain`` zero everywhere.
+
 Raster rows run north to south (row 0 is the north edge), as images and GeoTIFFs store them.
 Geodata: a GeoTIFF's CRS and transform (read with rasterio) or ``site.origin`` place the grid
 on the Earth; GeoJSON polygons (read with shapely) are reprojected from longitude/latitude
@@ -93,7 +97,7 @@ class Site:
     folder: Path
     settings: SiteSettings
     heights: np.ndarray
-    """(X, Y) obstacle heights above ground, metres, per cell."""
+    """(X, Y) obstacle heights above the terrain, metres, per cell."""
     blocked: np.ndarray
     """(X, Y, Z) where the UAV cannot be."""
     occluding: np.ndarray
@@ -108,8 +112,17 @@ class Site:
     """(k, 3) start cells (x, y, z)."""
     georef: GeoRef
     level_height_m: float
+    terrain: np.ndarray
+    """(X, Y) the ground's height above sea level, metres (zero on a flat site)."""
+    ground: str
+    """How the ground was made (a flat site, a DTM, a DSM's estimate), in words."""
     fingerprint: str = field(default="")
     """A digest of the site's files: a run records it, so a changed site is noticed."""
+
+    @property
+    def has_terrain(self) -> bool:
+        """Whether the ground is not flat (a terrain or surface model was given)."""
+        return bool(self.settings.terrain or self.settings.surface)
 
     @property
     def size(self) -> tuple[int, int, int]:
@@ -151,10 +164,27 @@ def _fingerprint(folder: Path) -> str:
 @functools.lru_cache(maxsize=8)
 def _load_cached(folder: Path, fingerprint: str) -> Site:
     from pirl.config.load import read_yaml
+    from pirl.world.terrain import GridFrame, frame_of, read_ground
 
     settings = SiteSettings.from_dict(read_yaml(folder / SITE_FILE))
-    raster = _read_raster(folder, settings)
-    georef, heights = _grid_heights(raster, settings)
+    if settings.heights:
+        raster = _read_raster(folder, settings)
+        georef, heights = _grid_heights(raster, settings)
+        frame = GridFrame(
+            georef.crs, georef.west, georef.south, georef.cell_size_m, heights.shape[:2]
+        )
+    else:
+        frame = frame_of(folder, settings)
+        georef = GeoRef(frame.crs, frame.west, frame.south, frame.cell)
+        heights = np.zeros(frame.shape)
+    if (settings.terrain or settings.surface) and not georef.real:
+        raise ConfigError(
+            "site.terrain: a ground model needs a georeferenced grid (a GeoTIFF with a CRS, or "
+            "site.origin)"
+        )
+    ground = read_ground(folder, settings, frame)
+    if ground.obstacles is not None:
+        heights = ground.obstacles
     cells = heights.shape[0] * heights.shape[1] * settings.levels
     if cells > settings.max_cells:
         raise ConfigError(
@@ -194,6 +224,8 @@ def _load_cached(folder: Path, fingerprint: str) -> Site:
         starts=starts,
         georef=georef,
         level_height_m=float(level_m),
+        terrain=ground.terrain,
+        ground=ground.note,
         fingerprint=fingerprint,
     )
 
@@ -261,6 +293,8 @@ def _read_geotiff(path: Path, s: SiteSettings) -> _Raster:
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
+    from pirl.world.terrain import check_north_up
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotGeoreferencedWarning)  # said below, in one line
         src = rasterio.open(path)
@@ -276,23 +310,9 @@ def _read_geotiff(path: Path, s: SiteSettings) -> _Raster:
             band = src.read(1, masked=True).astype(np.float64).filled(np.nan)
             pixel = s.pixel_size_m or s.cell_size_m or DEFAULT_CELL_M
             return _Raster(band, pixel, local_crs(s.origin), 0.0, 0.0)
-        if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.e >= 0:
-            raise ConfigError(
-                f"site.heights: {path.name} is rotated or not north-up; warp it to a north-up "
-                "grid first (gdalwarp)"
-            )
-        if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
-            raise ConfigError(
-                f"site.heights: {path.name} has non-square pixels ({t.a} x {-t.e}); warp it "
-                "to square pixels first"
-            )
+        check_north_up(src, path.name, "heights")
         band = src.read(1, masked=True).astype(np.float64)
         crs = src.crs
-        if crs is not None and crs.is_geographic:
-            raise ConfigError(
-                f"site.heights: {path.name} is in degrees ({crs.to_string()}); reproject it "
-                "to a metric CRS (e.g. its UTM zone) first"
-            )
         west, south = t.c, t.f + t.e * src.height
         pixel = abs(t.a)
     values = band.filled(np.nan)

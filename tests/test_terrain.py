@@ -1,0 +1,208 @@
+"""Ground models: a DTM and a DSM in metres above sea level read onto a site's grid, levels
+that follow the terrain, and every bad ground model refused in one line."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+
+from cli_checks import one_error_line
+from pirl.config.errors import ConfigError
+from pirl.config.world import VCPPConfig
+from pirl.missions.site_check import check_site
+from pirl.world.seeable import with_site
+from pirl.world.site import load_site
+
+ROOT = Path(__file__).resolve().parents[1]
+HILLS = ROOT / "examples" / "sites" / "hills"
+
+
+def pirl(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pirl", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def band(path: Path) -> np.ndarray:
+    """A raster's first band as (x east, y north), the grid's axes."""
+    with rasterio.open(path) as src:
+        return src.read(1).astype(np.float64)[::-1, :].T
+
+
+def copy_hills(folder: Path, **changes: object) -> Path:
+    """The hills example in ``folder`` with ``changes`` to its site.yaml (None drops a key)."""
+    import yaml
+
+    shutil.copytree(HILLS, folder)
+    settings = yaml.safe_load((folder / "site.yaml").read_text())
+    for key, value in changes.items():
+        if value is None:
+            settings.pop(key, None)
+        else:
+            settings[key] = value
+    (folder / "site.yaml").write_text(yaml.safe_dump(settings))
+    return folder
+
+
+def test_hills_terrain_and_obstacles_come_from_the_rasters() -> None:
+    site = load_site(HILLS)
+    dtm, dsm = band(HILLS / "dtm.tif"), band(HILLS / "dsm.tif")
+    assert site.has_terrain and site.size == (48, 40, 4)
+    # Same grid as the rasters: the terrain is the DTM's posts, obstacles DSM - DTM >= 1 m.
+    np.testing.assert_allclose(site.terrain, dtm, atol=1e-3)
+    expected = np.where(dsm - dtm >= 1.0, dsm - dtm, 0.0)
+    np.testing.assert_allclose(site.heights, expected, atol=1e-3)
+    # A hill is ground to fly over: every area cell without an obstacle is coverable ground,
+    # and level 0 is free wherever no obstacle stands and no no-fly zone lies.
+    assert site.terrain.max() - site.terrain.min() > 40
+    assert np.array_equal(site.coverable, site.area & (site.heights == 0))
+    assert np.array_equal(site.blocked[:, :, 0], (site.heights > 0) | site.no_fly)
+
+
+def test_flat_sites_have_zero_terrain() -> None:
+    for name in ("campus", "village", "town"):
+        site = load_site(ROOT / "examples" / "sites" / name)
+        assert not site.has_terrain and not site.terrain.any(), name
+
+
+def test_site_check_accounts_for_every_cell_and_reports_the_ground() -> None:
+    _, seen, report = check_site(HILLS)
+    assert report["seeable"] + sum(report["unseeable"].values()) == report["coverable"]
+    lo, hi = report["elevation_m"]
+    assert 299 < lo < hi < 346
+    assert 5 < report["slope_deg"]["mean"] < report["slope_deg"]["max"] < 45
+    g0, g1 = report["gsd_cm_per_px"]
+    assert 0 < g0 < g1 < 5
+    assert "terrain dtm.tif" in report["ground"]
+    proc = pirl("site", "check", str(HILLS))
+    assert proc.returncode == 0, proc.stderr
+    assert "m above sea level, slope" in proc.stdout
+    assert "ground sample distance" in proc.stdout
+
+
+def test_a_dtm_in_another_crs_is_reprojected(tmp_path: Path) -> None:
+    """The DTM written in UTM zone 32N (the site's grid is zone 33N's): read back onto the grid
+    within a few centimetres of the same ground (bilinear between reprojected posts)."""
+    from rasterio.warp import Resampling, calculate_default_transform, reproject
+
+    folder = copy_hills(tmp_path / "hills")
+    with rasterio.open(HILLS / "dtm.tif") as src:
+        transform, width, height = calculate_default_transform(
+            src.crs, "EPSG:32632", src.width, src.height, *src.bounds, resolution=2.5
+        )
+        data = np.full((height, width), np.nan, dtype=np.float32)
+        reproject(
+            src.read(1), data, src_transform=src.transform, src_crs=src.crs,
+            dst_transform=transform, dst_crs="EPSG:32632", resampling=Resampling.bilinear,
+            dst_nodata=np.nan,
+        )  # fmt: skip
+        profile = src.profile | {
+            "crs": "EPSG:32632", "transform": transform, "width": width, "height": height,
+            "nodata": np.nan,
+        }  # fmt: skip
+    with rasterio.open(folder / "dtm.tif", "w", **profile) as dst:
+        dst.write(data, 1)
+    site = load_site(folder)
+    original = load_site(HILLS)
+    inner = np.s_[2:-2, 2:-2]
+    assert np.abs(site.terrain - original.terrain)[inner].max() < 0.6
+    assert np.abs(site.terrain - original.terrain)[inner].mean() < 0.1
+
+
+def test_a_dsm_alone_estimates_the_terrain(tmp_path: Path) -> None:
+    folder = copy_hills(tmp_path / "hills", terrain=None)
+    site = load_site(folder)
+    dtm = band(HILLS / "dtm.tif")
+    assert "estimated from the surface dsm.tif" in site.ground
+    # The three buildings stand out as obstacles; the open ground is within 1.5 m of the DTM.
+    original = load_site(HILLS)
+    buildings = original.heights >= 8.0
+    assert (site.heights[buildings] > 0).mean() > 0.9
+    open_ground = original.heights == 0
+    assert np.abs(site.terrain - dtm)[open_ground].mean() < 1.5
+    report = check_site(folder)[2]
+    assert "estimated" in report["ground"]
+
+
+def _write(path: Path, values: np.ndarray, **profile: object) -> None:
+    with rasterio.open(HILLS / "dtm.tif") as src:
+        base = src.profile
+    with rasterio.open(path, "w", **(base | profile)) as dst:
+        dst.write(values.astype(np.float32), 1)
+        for key, value in profile.items():
+            if key == "units":
+                dst.units = (value,)
+
+
+def _broken_dtm(folder: Path, kind: str) -> None:
+    dtm = band(HILLS / "dtm.tif").T[::-1].copy()  # rows north to south again
+    if kind == "nan":
+        dtm[5:8, 5:8] = np.nan
+        _write(folder / "dtm.tif", dtm)
+    elif kind == "nodata":
+        dtm[0, 0:4] = -9999.0
+        _write(folder / "dtm.tif", dtm, nodata=-9999.0)
+    elif kind == "feet":
+        _write(folder / "dtm.tif", dtm * 3.28084)
+        with rasterio.open(folder / "dtm.tif", "r+") as dst:
+            dst.units = ("ft",)
+    elif kind == "degrees":
+        from rasterio.transform import from_origin
+
+        _write(folder / "dtm.tif", dtm, crs="EPSG:4326", transform=from_origin(15, 47, 1e-4, 1e-4))
+
+
+GROUND_MISTAKES = {
+    "nan": ("site.terrain", "9 of the grid's 1,920 cells are no-data, NaN"),
+    "nodata": ("site.terrain", "no-data, NaN or outside dtm.tif"),
+    "feet": ("site.terrain", "states heights in 'ft'"),
+    "degrees": ("site.terrain", "is in degrees"),
+    "heights-and-surface": ("site.surface", "not both"),
+    "not-a-tif": ("site.terrain", "expected a GeoTIFF"),
+    "missing": ("site.terrain", "does not exist"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(GROUND_MISTAKES))
+def test_bad_ground_models_are_refused_in_one_line(tmp_path: Path, name: str) -> None:
+    changes: dict[str, object] = {}
+    if name == "heights-and-surface":
+        changes = {"heights": "dtm.tif"}
+    elif name == "not-a-tif":
+        changes = {"terrain": "dtm.png"}
+    elif name == "missing":
+        changes = {"terrain": "none.tif"}
+    folder = copy_hills(tmp_path / "hills", **changes)
+    if name in ("nan", "nodata", "feet", "degrees"):
+        _broken_dtm(folder, name)
+    with pytest.raises(ConfigError) as caught:
+        with_site(VCPPConfig(), str(folder))
+    for needle in GROUND_MISTAKES[name]:
+        assert needle in str(caught.value), str(caught.value)
+    if name in ("nan", "feet"):  # the same line from the CLI, and no folder
+        out = tmp_path / "plan"
+        proc = pirl("plan", "--site", str(folder), "--method", "boustrophedon", "--out", str(out))
+        one_error_line(proc, *GROUND_MISTAKES[name])
+        assert not out.exists()
+
+
+def test_the_physics_simulation_refuses_a_terrain_site() -> None:
+    from pirl.physics.flight import Mission
+
+    cfg = with_site(VCPPConfig(), str(HILLS))
+    with pytest.raises(ConfigError, match="flies flat ground only"):
+        Mission(cfg)
+
+
+def test_example_sites_file_is_current() -> None:
+    """The hills' GeoJSON polygons are in longitude/latitude (the site's CRS is UTM 33N)."""
+    area = json.loads((HILLS / "area.geojson").read_text())
+    lon, lat = area["features"][0]["geometry"]["coordinates"][0][0]
+    assert 14 < lon < 16 and 46 < lat < 48
