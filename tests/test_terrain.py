@@ -206,3 +206,132 @@ def test_example_sites_file_is_current() -> None:
     area = json.loads((HILLS / "area.geojson").read_text())
     lon, lat = area["features"][0]["geometry"]["coordinates"][0][0]
     assert 14 < lon < 16 and 46 < lat < 48
+
+
+# -- missions over the terrain ----------------------------------------------------------------
+def _flown_legs(plan: Path) -> list[tuple[float, float, float]]:
+    """(lat, lon, height) of every take-off and waypoint of a .plan, in order."""
+    from pymavlink.dialects.v20 import common as mav
+
+    items = json.loads(plan.read_text())["mission"]["items"]
+    nav = (mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_WAYPOINT)
+    return [tuple(it["params"][4:7]) for it in items if it["command"] in nav]
+
+
+def _own_profile(points: list[tuple[float, float, float]], frame: str):
+    """Sample every metre of every leg against the source rasters, read here with rasterio
+    and pyproj (not through pirl): (heights above the DTM, clearances above the DSM, wanted
+    height above ground per sample)."""
+    from pyproj import Transformer
+    from scipy.interpolate import RegularGridInterpolator
+
+    with rasterio.open(HILLS / "dtm.tif") as src:
+        dtm, crs, t = src.read(1).astype(float), src.crs, src.transform
+    with rasterio.open(HILLS / "dsm.tif") as src:
+        dsm = src.read(1).astype(float)
+    rows, cols = dtm.shape
+    # Pixel centres: x = c + (col + 0.5) a, y = f + (row + 0.5) e (e < 0: rows run south).
+    xs = t.c + (np.arange(cols) + 0.5) * t.a
+    ys = t.f + (np.arange(rows) + 0.5) * t.e
+    ground = RegularGridInterpolator((ys[::-1], xs), dtm[::-1], bounds_error=False, fill_value=None)
+    to = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    e, n = to.transform([p[1] for p in points], [p[0] for p in points])
+    alt = [p[2] for p in points]
+    agl_err, clearance = [], []
+    for k in range(1, len(points)):
+        (e0, n0, a0), (e1, n1, a1) = (e[k - 1], n[k - 1], alt[k - 1]), (e[k], n[k], alt[k])
+        steps = max(1, int(np.ceil(np.hypot(e1 - e0, n1 - n0))))
+        s = np.linspace(0, 1, steps + 1)
+        pe, pn = e0 + s * (e1 - e0), n0 + s * (n1 - n0)
+        g = ground(np.stack([pn, pe], axis=1))
+        height = a0 + s * (a1 - a0) if frame == "amsl" else g + a0  # terrain: held above ground
+        col = np.clip(((pe - t.c) / t.a).astype(int), 0, cols - 1)
+        row = np.clip(((pn - t.f) / t.e).astype(int), 0, rows - 1)
+        clearance.append(height - dsm[row, col])
+        g0, g1 = ground([[n0, e0]])[0], ground([[n1, e1]])[0]
+        agl0, agl1 = a0 - g0, a1 - g1
+        if frame == "amsl" and abs(agl0 - agl1) < 0.01 and steps > 1:  # a level leg
+            agl_err.append(np.abs(height - g - agl0))
+    return np.concatenate(agl_err or [np.zeros(0)]), np.concatenate(clearance)
+
+
+@pytest.fixture(scope="module")
+def hills_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("plans") / "hills"
+    proc = pirl("plan", "--site", str(HILLS), "--method", "boustrophedon", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def test_the_planner_mission_follows_the_terrain_with_clearance(hills_plan: Path) -> None:
+    from pymavlink.dialects.v20 import common as mav
+
+    summary = json.loads((hills_plan / "summary.json").read_text())
+    assert summary["vcr"] >= 0.99 and summary["altitude_frame"] == "amsl"
+    items = json.loads((hills_plan / "mission.plan").read_text())["mission"]["items"]
+    frames = {it["frame"] for it in items if it["command"] == mav.MAV_CMD_NAV_WAYPOINT}
+    assert frames == {mav.MAV_FRAME_GLOBAL}
+    assert len(items) <= summary["mission"]["max_items"]
+    errors, clearance = _own_profile(_flown_legs(hills_plan / "mission.plan"), "amsl")
+    tol = summary["mission"]["terrain_tolerance_m"]
+    assert errors.max() <= tol + 0.05, errors.max()  # bilinear ground here and there
+    assert clearance.min() >= summary["mission"]["min_clearance_m"] - 0.05, clearance.min()
+    assert summary["terrain"]["max_height_error_m"] <= tol
+    # The home the ground station shows is on the ground, above sea level.
+    home = json.loads((hills_plan / "mission.plan").read_text())["mission"]["plannedHomePosition"]
+    assert 300 < home[2] < 345
+
+
+def test_mavsdk_uploads_the_terrain_mission(hills_plan: Path) -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    items = json.loads((hills_plan / "mission.plan").read_text())["mission"]["items"]
+    helper = Path(__file__).parent / "mavsdk_upload.py"
+    proc = subprocess.run(
+        [sys.executable, str(helper), str(hills_plan / "mission.plan"), str(port)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    line = next((x for x in proc.stdout.splitlines() if x.startswith("RECEIVED ")), None)
+    assert line is not None, proc.stdout + proc.stderr
+    got = json.loads(line.removeprefix("RECEIVED "))
+    assert got["imported"] == len(items) == len(got["items"])
+    for item, recv in zip(items, got["items"], strict=True):
+        assert (recv["command"], recv["frame"]) == (item["command"], item["frame"])
+        if item["params"][6] is not None and item["frame"] == 0:  # MAV_FRAME_GLOBAL
+            assert abs(recv["z"] - item["params"][6]) < 1e-3
+
+
+def test_the_terrain_frame_leaves_the_following_to_the_autopilot(tmp_path: Path) -> None:
+    from pymavlink.dialects.v20 import common as mav
+
+    config = tmp_path / "terrain.yaml"
+    config.write_text("mission:\n  altitude_frame: terrain\n")
+    out = tmp_path / "plan"
+    proc = pirl("plan", "--site", str(HILLS), "--method", "boustrophedon", "--config",
+                str(config), "--out", str(out))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    items = json.loads((out / "mission.plan").read_text())["mission"]["items"]
+    nav = [it for it in items if it["command"] == mav.MAV_CMD_NAV_WAYPOINT]
+    assert {it["frame"] for it in nav} == {mav.MAV_FRAME_GLOBAL_TERRAIN_ALT}
+    assert {it["params"][6] for it in nav} <= {5.0, 10.0, 15.0, 20.0}  # heights above ground
+    _, clearance = _own_profile(_flown_legs(out / "mission.plan"), "terrain")
+    assert clearance.min() >= 2.0 - 0.05
+
+
+def test_too_little_clearance_and_a_flat_amsl_frame_are_refused(tmp_path: Path) -> None:
+    config = tmp_path / "close.yaml"
+    config.write_text("mission:\n  min_clearance_m: 6\n")
+    out = tmp_path / "plan"
+    proc = pirl("plan", "--site", str(HILLS), "--method", "boustrophedon", "--config",
+                str(config), "--out", str(out))  # fmt: skip
+    one_error_line(proc, "mission.min_clearance_m=6", "above the surface model at lat")
+    assert not out.exists()
+    config.write_text("mission:\n  altitude_frame: amsl\n")
+    campus = ROOT / "examples" / "sites" / "campus"
+    proc = pirl("plan", "--site", str(campus), "--method", "boustrophedon", "--config",
+                str(config), "--out", str(out))  # fmt: skip
+    one_error_line(proc, "mission.altitude_frame=amsl", "flat ground")
+    assert not out.exists()

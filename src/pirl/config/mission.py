@@ -7,6 +7,10 @@ from dataclasses import dataclass
 
 from pirl.config.load import Settings
 
+ALTITUDE_FRAMES = ("relative", "amsl", "terrain")
+"""Frames of a mission's heights: above home (``MAV_FRAME_GLOBAL_RELATIVE_ALT``), above sea
+level (``MAV_FRAME_GLOBAL``) or above the terrain (``MAV_FRAME_GLOBAL_TERRAIN_ALT``)."""
+
 DEFAULT_ORIGIN = (47.397742, 8.545594)
 """Where a generated world (or a site without a geo-reference) is placed: PX4's simulated
 home in Zurich. Not a real survey site; every file written there says so."""
@@ -47,6 +51,20 @@ class MissionSettings(Settings, section="mission"):
     """The longest a UAV's take-off may be held back for its separation before the plan is
     refused."""
 
+    altitude_frame: str = ""
+    """The frame of the heights written: relative, amsl or terrain (``ALTITUDE_FRAMES``);
+    empty = amsl on a site with a terrain model, relative elsewhere (docs/missions.md)."""
+    terrain_tolerance_m: float = 1.0
+    """Over terrain (amsl, relative): points are inserted along a leg wherever the ground
+    under it departs from the leg's height above ground by more than this."""
+    min_clearance_m: float = 2.0
+    """Over terrain: refuse a plan passing closer than this above the surface model (DSM)
+    at any point sampled every metre along its legs."""
+    max_climb_m_s: float = 3.0
+    """Over terrain: the fastest climb along a leg; a steeper leg is flown slower (the
+    flight time's estimate)."""
+    max_descent_m_s: float = 2.0
+    """Over terrain: the fastest descent along a leg."""
     sensor_width_mm: float = 13.2
     """The camera's sensor width (default: a 1-inch 20 MP camera, 13.2 mm) for the ground
     sample distance ``pirl site check`` reports."""
@@ -60,7 +78,12 @@ class MissionSettings(Settings, section="mission"):
         self.require_positive(
             "speed_m_s", "climb_m_s", "battery_s", "max_items", "cell_size_m", "level_height_m",
             "check_every_s", "sensor_width_mm", "focal_length_mm", "image_width_px",
+            "terrain_tolerance_m", "max_climb_m_s", "max_descent_m_s",
         )  # fmt: skip
+        if not (math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0):
+            raise self.refuse("min_clearance_m", "must be >= 0")
+        if self.altitude_frame:
+            self.require_choice("altitude_frame", ALTITUDE_FRAMES)
         for key in ("separation_m", "max_delay_s"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
                 raise self.refuse(key, "must be >= 0")
@@ -75,4 +98,4 @@ class MissionSettings(Settings, section="mission"):
         self.require_choice("autopilot", ("px4", "ardupilot"))
 
 
-__all__ = ["DEFAULT_ORIGIN", "MissionSettings"]
+__all__ = ["ALTITUDE_FRAMES", "DEFAULT_ORIGIN", "MissionSettings"]

@@ -64,14 +64,25 @@ def zoom10_from_percent(percent: float) -> int:
 
 
 # -- MAVLink ----------------------------------------------------------------------------------
+def altitude_frame_number(frame: str) -> int:
+    """The MAVLink frame of ``mission.altitude_frame``'s heights: above home, above sea level
+    (``MAV_FRAME_GLOBAL``) or above the terrain."""
+    m = mav()
+    return {
+        "relative": m.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        "amsl": m.MAV_FRAME_GLOBAL,
+        "terrain": m.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    }[frame]
+
+
 def mavlink_items(sortie: Sortie, geo: Geo, gimbal: str) -> list[dict[str, Any]]:
     """Each item as MAVLink: command, frame and params[7] (NaN for "unused")."""
     m = mav()
-    rel, none = m.MAV_FRAME_GLOBAL_RELATIVE_ALT, m.MAV_FRAME_MISSION
+    rel, none = altitude_frame_number(geo.frame), m.MAV_FRAME_MISSION
     out = []
     for item in sortie.items:
         if item.kind in ("takeoff", "waypoint"):
-            lat, lon, alt = geo.position(item.cell)
+            lat, lon, alt = geo.position(item.cell, item.xy)
             cmd = m.MAV_CMD_NAV_TAKEOFF if item.kind == "takeoff" else m.MAV_CMD_NAV_WAYPOINT
             params = [0.0, 0.0, 0.0, NAN, lat, lon, alt]
             out.append({"command": cmd, "frame": rel, "params": params})
@@ -132,7 +143,7 @@ def plan_json(items: list[dict[str, Any]], geo: Geo, s: MissionSettings, fences:
             "vehicleType": int(m.MAV_TYPE_QUADROTOR),
             "cruiseSpeed": s.speed_m_s,
             "hoverSpeed": s.speed_m_s,
-            "plannedHomePosition": [geo.home[0], geo.home[1], 0.0],
+            "plannedHomePosition": [geo.home[0], geo.home[1], geo.home_ground_m],
             "items": simple,
         },
         "geoFence": {"version": 2, "circles": [], "polygons": fences["polygons"]},
@@ -146,7 +157,7 @@ def write_waypoints(path: Path, items: list[dict[str, Any]], geo: Geo) -> None:
     and the ``.plan`` and the ``.waypoints`` of one mission agree within a centimetre)."""
     m = mav()
     rows = [(0, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_NAV_WAYPOINT,
-             [0.0, 0.0, 0.0, 0.0, geo.home[0], geo.home[1], 0.0])]  # fmt: skip
+             [0.0, 0.0, 0.0, 0.0, geo.home[0], geo.home[1], geo.home_ground_m])]  # fmt: skip
     rows += [(n, 0, it["frame"], it["command"], it["params"]) for n, it in enumerate(items, 1)]
     lines = ["QGC WPL 110"]
     for seq, current, frame, command, p in rows:
@@ -197,7 +208,9 @@ def geojson(ep: Episode, all_items: list[Sortie], geo: Geo) -> dict:
     for n, sortie in enumerate(all_items, start=1):
         for item in sortie.items:
             if item.kind == "waypoint" and item.camera is not None:
-                lat, lon, alt = geo.position(item.cell)
+                # Heights above the ground, as the KML's relativeToGround reads them.
+                lat, lon, _ = geo.position(item.cell, item.xy)
+                alt = geo.agl(item.cell[2])
                 tilt, pan, zoom10 = item.camera
                 feats.append({"type": "Feature", "geometry": {"type": "Point",
                               "coordinates": [lon, lat, alt]},
@@ -238,6 +251,7 @@ def kml(features: dict, name: str, description: str) -> str:
 
 
 __all__ = [
+    "altitude_frame_number",
     "fences",
     "geojson",
     "gimbal_pitch",

@@ -31,8 +31,9 @@ from pirl.config.errors import ConfigError
 from pirl.config.mission import DEFAULT_ORIGIN, MissionSettings
 from pirl.config.world import VCPPConfig
 from pirl.missions.formats import fences, geojson, kml, mavlink_items, plan_json, write_waypoints
-from pirl.missions.items import Episode, Geo, Item, Sortie, Step
+from pirl.missions.items import Episode, Geo, Item, Point, Sortie, Step
 from pirl.missions.staging import host_name, remove_stale_staging
+from pirl.missions.terrain import check_profile, follow_ground
 
 
 def file_digest(path: Path) -> str:
@@ -115,92 +116,160 @@ def mission_items(ep: Episode, cell_m: float, merge: bool = True) -> list[Item]:
 
 
 def geo_for(cfg: VCPPConfig, settings: MissionSettings, start: tuple[int, int, int]) -> Geo:
-    """A site's geo-reference, or the documented default origin (not a real place)."""
+    """A site's geo-reference, or the documented default origin (not a real place); over a
+    site's terrain model, its ground profile and the frame of the heights written."""
+    from pirl.missions.terrain import altitude_frame
     from pirl.world.site import GeoRef, load_site, local_crs
 
+    home = (start[0] + 0.5, start[1] + 0.5, start[2])
     if cfg.site:
         site = load_site(cfg.site)
+        frame = altitude_frame(settings, site.has_terrain)
         if site.georef.real:
-            geo = Geo(site.georef, site.level_height_m, True, (0.0, 0.0))
+            geo = Geo(site.georef, site.level_height_m, True, (0.0, 0.0), frame, home_point=home)
         else:
             ref = GeoRef(local_crs(DEFAULT_ORIGIN), 0.0, 0.0, site.georef.cell_size_m)
-            geo = Geo(ref, site.level_height_m, False, (0.0, 0.0))
+            geo = Geo(ref, site.level_height_m, False, (0.0, 0.0), frame, home_point=home)
+        if site.has_terrain:
+            from pirl.missions.terrain import WayHome
+
+            geo.ground = site.ground_profile()
+            geo.home_ground_m = float(geo.ground.terrain([home[0]], [home[1]])[0])
+            geo.way_home = WayHome(site.blocked, tuple(int(v) for v in start))
     else:
+        frame = altitude_frame(settings, False)
         ref = GeoRef(local_crs(DEFAULT_ORIGIN), 0.0, 0.0, settings.cell_size_m)
-        geo = Geo(ref, settings.level_height_m, False, (0.0, 0.0))
+        geo = Geo(ref, settings.level_height_m, False, (0.0, 0.0), frame, home_point=home)
     lat, lon, _ = geo.position(start)
     geo.home = (lat, lon)
     return geo
 
 
 # -- sorties -----------------------------------------------------------------------------------
-def _metres(geo: Geo, a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[float, float]:
+def _metres(geo: Geo, a: Point, b: Point) -> tuple[float, float]:
     c = geo.georef.cell_size_m
     return math.hypot(a[0] - b[0], a[1] - b[1]) * c, abs(a[2] - b[2]) * geo.level_m
+
+
+def leg_seconds(geo: Geo, s: MissionSettings, a: Point, b: Point) -> tuple[float, float]:
+    """(seconds, metres) of the leg a -> b: cruise plus level changes at ``climb_m_s``; over
+    terrain a leg whose ground rises or falls faster than ``max_climb_m_s`` or
+    ``max_descent_m_s`` allows at cruise speed is flown slower."""
+    h, v = _metres(geo, a, b)
+    t = h / s.speed_m_s + v / s.climb_m_s
+    if geo.ground is None:
+        return t, h + v
+    rise = geo.amsl(b) - geo.amsl(a) - (b[2] - a[2]) * geo.level_m  # the ground's part
+    rate = s.max_climb_m_s if rise > 0 else s.max_descent_m_s
+    return max(t, abs(rise) / rate + v / s.climb_m_s), h + v + abs(rise)
 
 
 def sorties(items: list[Item], ep: Episode, geo: Geo, s: MissionSettings) -> list[Sortie]:
     """Split the flight into sorties that each fit ``battery_s * (1 - reserve)`` with the way
     home, and ``max_items``; each takes off at home, flies to where the last one stopped, sets
-    the camera it had, and returns to launch."""
-    budget = s.battery_s * (1.0 - s.reserve)
-    home = (ep.start[0], ep.start[1], -1)
+    the camera it had, and returns to launch. Over terrain the ways out and home go through
+    the grid's free cells as level legs that follow the ground (:mod:`pirl.missions.terrain`),
+    ending above home before the return to launch (whose own altitude is above home, not
+    above the ground, so it must not fly the way itself)."""
+    from pirl.missions.terrain import via_points
 
-    def leg_s(a: tuple[int, int, int], b: tuple[int, int, int]) -> tuple[float, float]:
-        h, v = _metres(geo, a, b)
-        return h / s.speed_m_s + v / s.climb_m_s, h + v
+    budget = s.battery_s * (1.0 - s.reserve)
+    home: Point = (geo.home_point[0], geo.home_point[1], -1)
+    over = geo.way_home is not None
+
+    def leg_s(a: Point, b: Point) -> tuple[float, float]:
+        return leg_seconds(geo, s, a, b)
+
+    def route(a: Point, cells: list[tuple[int, int, int]]) -> tuple[list[Item], float, float]:
+        """Waypoints from a through ``cells`` (level legs following the ground), with their
+        seconds and metres."""
+        out, t, d, here = [], 0.0, 0.0, a
+        for c in cells:
+            p = (c[0] + 0.5, c[1] + 0.5, c[2])
+            inserted = via_points(geo, here, p, s.terrain_tolerance_m)
+            out += [Item("waypoint", c, xy=(q[0], q[1])) for q in inserted]
+            out.append(Item("waypoint", c))
+            dt, dd = leg_s(here, p)
+            t, d, here = t + dt, d + dd, p
+        return out, t, d
+
+    def cells_home(p: Point) -> list[tuple[int, int, int]]:
+        cell = (int(p[0]), int(p[1]), p[2])
+        first = [cell] if (p[0] % 1, p[1] % 1) != (0.5, 0.5) else []  # off-centre: its centre
+        return first + geo.way_home.corners(cell)
+
+    def way_home(p: Point) -> tuple[list[Item], float, float]:
+        """The way from p home and down: items (the return to launch last), seconds, metres."""
+        if not over:
+            t, d = leg_s(p, home)
+            return [Item("rtl")], t, d
+        out, t, d = route(p, cells_home(p))
+        dt, dd = leg_s(geo.home_point, home)
+        return [*out, Item("rtl")], t + dt, d + dd
 
     out: list[Sortie] = []
-    where, camera = ep.start, ep.camera
+    where, where_item, camera = ep.start_point(), Item("waypoint", ep.start), ep.camera
 
     def open_sortie() -> Sortie:
         sortie = Sortie()
-        sortie.items.append(Item("takeoff", where))
-        t, d = leg_s(home, where)
+        sortie.items.append(Item("takeoff", ep.start if over else where_item.cell))
+        if over:
+            t, d = leg_s(home, geo.home_point)
+            if out:  # the way out: the way home from where the last sortie stopped, reversed
+                back = cells_home(where)[::-1][1:] + [where_item.cell]
+                way, dt, dd = route(geo.home_point, back[:-1])
+                sortie.items += way
+                last = way[-1].point() if way else geo.home_point
+                t, d = t + dt, d + dd + leg_s(last, where)[1]
+        else:
+            t, d = leg_s(home, where)
         sortie.seconds, sortie.distance_m = t, d
         if out:  # resume: back where the last sortie stopped, with its camera
-            sortie.items.append(Item("waypoint", where, camera))
+            sortie.items.append(Item("waypoint", where_item.cell, camera, xy=where_item.xy))
             sortie.items += [Item("gimbal", camera=camera), Item("zoom", camera=camera)]
             sortie.seconds += 2 * s.photo_s
         return sortie
 
+    def close(sortie: Sortie) -> None:
+        way, t, d = way_home(where)
+        sortie.items += way
+        sortie.seconds += t
+        sortie.distance_m += d
+
     current = open_sortie()
     for item in items:
-        t, d, to = 0.0, 0.0, where
+        t, d, to, to_cell = 0.0, 0.0, where, where_item.cell
         if item.kind == "waypoint":
-            t, d = leg_s(where, item.cell)
-            to = item.cell
+            to, to_cell = item.point(), item.cell
+            t, d = leg_s(where, to)
         elif item.kind in ("gimbal", "zoom", "capture"):
             t = s.photo_s
-        back, _ = leg_s(to, home)
-        if current.seconds + t + back > budget or len(current.items) + 2 > s.max_items:
+        back_items, back, _ = way_home(to)
+        full = len(current.items) + 1 + len(back_items) > s.max_items
+        if current.seconds + t + back > budget or full:
             if len(current.items) <= 1 + 3 * bool(out):
                 raise ConfigError(
                     f"mission.battery_s={s.battery_s:g}: one battery (less the reserve "
-                    f"{s.reserve:g}) cannot reach cell {to} and return; raise battery_s or "
+                    f"{s.reserve:g}) cannot reach cell {to_cell} and return; raise battery_s or "
                     "lower reserve"
                 )
-            current.items.append(Item("rtl"))
-            current.seconds += leg_s(where, home)[0]
-            current.distance_m += leg_s(where, home)[1]
+            close(current)
             out.append(current)
             current = open_sortie()
             if item.kind == "waypoint":
-                t, d = leg_s(where, item.cell)
+                t, d = leg_s(where, to)
         current.items.append(item)
         current.seconds += t
         current.distance_m += d
         if item.kind == "waypoint":
-            where, camera = item.cell, item.camera or camera
+            where, where_item = to, item
+            camera = item.camera or camera
             current.photos += int(item.value)
         if item.kind in ("gimbal", "zoom") and item.camera is not None:
             camera = item.camera
         if item.kind == "capture":
             current.photos += 1
-    current.items.append(Item("rtl"))
-    t, d = leg_s(where, home)
-    current.seconds += t
-    current.distance_m += d
+    close(current)
     out.append(current)
     return out
 
@@ -264,6 +333,9 @@ class Planned:
     items: list[Item]
     unmerged: list[Item]
     parts: list[Sortie]
+    terrain: dict[str, Any] | None = None
+    """Over terrain: the frame, the worst height error and clearance sampled along every leg
+    (:func:`~pirl.missions.terrain.check_profile`)."""
 
 
 def plan_episode(ep: Episode, cfg: VCPPConfig, settings: MissionSettings) -> Planned:
@@ -271,19 +343,20 @@ def plan_episode(ep: Episode, cfg: VCPPConfig, settings: MissionSettings) -> Pla
     ``mission.min_alt_m`` and ``max_alt_m``."""
     geo = geo_for(cfg, settings, ep.start)
     levels = sorted({c[2] for c in [ep.start, *(s.cell for s in ep.steps)]})
+    above = "the ground" if geo.ground is not None else "home"
     for z in (levels[0], levels[-1]):
         alt = (z + 1) * geo.level_m
         if not settings.min_alt_m <= alt <= settings.max_alt_m:
             key = "min_alt_m" if alt < settings.min_alt_m else "max_alt_m"
             raise ConfigError(
                 f"mission.{key}={getattr(settings, key):g}: the plan flies at {alt:g} m above "
-                f"home (level {z} of {geo.level_m:g} m levels); nothing written"
+                f"{above} (level {z} of {geo.level_m:g} m levels); nothing written"
             )
     cell_m = geo.georef.cell_size_m
-    items = mission_items(ep, cell_m)
-    return Planned(
-        ep, geo, items, mission_items(ep, cell_m, merge=False), sorties(items, ep, geo, settings)
-    )
+    items = follow_ground(mission_items(ep, cell_m), ep.start_point(), geo, settings)
+    parts = sorties(items, ep, geo, settings)
+    profile = check_profile(parts, geo, settings) if geo.ground is not None else None
+    return Planned(ep, geo, items, mission_items(ep, cell_m, merge=False), parts, profile)
 
 
 def check_new_folder(out: Path, gimbal: str) -> None:
@@ -363,6 +436,8 @@ def write_files(
         "flight_time_s": round(sum(p.seconds for p in parts), 1),
         "photos": sum(p.photos for p in parts),
         "climbs": sum(1 for a, b in zip(cells, cells[1:], strict=False) if b[2] > a[2]),
+        "altitude_frame": geo.frame,
+        "terrain": plan.terrain,
         "vcr": m["vcr"],
         "vcr_all": m.get("vcr_all", m["vcr"]),
         "energy_used_grid": round(1.0 - m["battery_left"], 4),

@@ -124,6 +124,15 @@ class Site:
         """Whether the ground is not flat (a terrain or surface model was given)."""
         return bool(self.settings.terrain or self.settings.surface)
 
+    def ground_profile(self) -> Any:
+        """A :class:`~pirl.world.terrain.GroundProfile`: terrain and surface at any point,
+        from the site's own rasters."""
+        from pirl.world.terrain import GridFrame, GroundProfile
+
+        g = self.georef
+        frame = GridFrame(g.crs, g.west, g.south, g.cell_size_m, self.heights.shape[:2])
+        return GroundProfile(self.folder, self.settings, frame, self.terrain, self.heights)
+
     @property
     def size(self) -> tuple[int, int, int]:
         """Grid size (X, Y, Z)."""

@@ -193,6 +193,88 @@ def read_ground(folder: Path, s: SiteSettings, frame: GridFrame) -> Ground:
     return Ground(terrain, obstacles, f"{how}; {rule}")
 
 
+class _Samples:
+    """A raster (rows north to south) sampled at points given in another CRS's metres."""
+
+    def __init__(self, values: np.ndarray, transform: Any, crs: str, grid_crs: str) -> None:
+        self.values = values
+        self.inverse = ~transform
+        self.to = None
+        if crs != grid_crs:
+            from pyproj import CRS, Transformer
+
+            if not CRS.from_user_input(crs).equals(CRS.from_user_input(grid_crs)):
+                self.to = Transformer.from_crs(grid_crs, crs, always_xy=True)
+
+    def pixels(self, e: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional (row, col) of points, pixel centres at whole numbers."""
+        if self.to is not None:
+            e, n = (np.asarray(v) for v in self.to.transform(e.tolist(), n.tolist()))
+        col, row = self.inverse * (e, n)
+        return np.asarray(row) - 0.5, np.asarray(col) - 0.5
+
+    def bilinear(self, e: np.ndarray, n: np.ndarray) -> np.ndarray:
+        from scipy.ndimage import map_coordinates
+
+        return map_coordinates(self.values, self.pixels(e, n), order=1, mode="nearest")
+
+    def containing(self, e: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """The value of the pixel each point lies in (a DSM pixel stands for its square)."""
+        row, col = self.pixels(e, n)
+        rows, cols = self.values.shape
+        r = np.clip(np.floor(row + 0.5).astype(int), 0, rows - 1)
+        c = np.clip(np.floor(col + 0.5).astype(int), 0, cols - 1)
+        return self.values[r, c]
+
+
+class GroundProfile:
+    """The terrain and the surface (metres above sea level) at any point of a site's grid,
+    read from the site's own rasters (not the grid): what a mission's heights above the
+    ground and its clearance are computed from. Points are grid coordinates (cell units,
+    cell (x, y) spans [x, x + 1) x [y, y + 1))."""
+
+    def __init__(self, folder: Path, s: SiteSettings, frame: GridFrame, terrain: np.ndarray,
+                 obstacles: np.ndarray) -> None:  # fmt: skip
+        from affine import Affine
+
+        self.frame = frame
+        nx, ny = frame.shape
+        grid = Affine(frame.cell, 0.0, frame.west, 0.0, -frame.cell, frame.south + ny * frame.cell)
+        self._terrain = (
+            self._read(folder / s.terrain, frame)
+            if s.terrain
+            else _Samples(terrain[:, ::-1].T.copy(), grid, frame.crs, frame.crs)
+        )
+        self._surface = self._read(folder / s.surface, frame) if s.surface else None
+        self._obstacles = obstacles
+
+    @staticmethod
+    def _read(path: Path, frame: GridFrame) -> _Samples:
+        import rasterio
+
+        with rasterio.open(path) as src:
+            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            return _Samples(values, src.transform, src.crs.to_wkt(), frame.crs)
+
+    def _metres(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        f = self.frame
+        return f.west + np.asarray(x, float) * f.cell, f.south + np.asarray(y, float) * f.cell
+
+    def terrain(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The bare ground's height above sea level (bilinear)."""
+        return self._terrain.bilinear(*self._metres(x, y))
+
+    def surface(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The surface's height above sea level: the DSM's pixel each point lies in, or,
+        without a DSM, the terrain plus the obstacle of the cell the point lies in."""
+        if self._surface is not None:
+            return self._surface.containing(*self._metres(x, y))
+        nx, ny = self.frame.shape
+        i = np.clip(np.floor(x).astype(int), 0, nx - 1)
+        j = np.clip(np.floor(y).astype(int), 0, ny - 1)
+        return self.terrain(x, y) + self._obstacles[i, j]
+
+
 def slope_deg(terrain: np.ndarray, cell: float) -> np.ndarray:
     """The terrain's slope per cell, degrees (central differences, one-sided at the edges)."""
     if min(terrain.shape) < 2:
@@ -204,6 +286,7 @@ def slope_deg(terrain: np.ndarray, cell: float) -> np.ndarray:
 __all__ = [
     "METRE_UNITS",
     "Ground",
+    "GroundProfile",
     "GridFrame",
     "check_north_up",
     "estimate_terrain",
