@@ -15,7 +15,7 @@ from cli_checks import one_error_line
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.env.vcpp_env import VCPPEnv
-from pirl.world.footprint import CameraPose, footprint_cells, lens_of
+from pirl.world.footprint import NO_GROUND, CameraPose, footprint_cells, lens_of
 from pirl.world.seeable import analyse, lens_for, with_site
 from pirl.world.site import load_site
 from world_hash import CONFIGS, state_hash
@@ -114,9 +114,9 @@ def test_frustum_occlusion_hides_ground_behind_a_wall(tmp_path: Path) -> None:
     lens = lens_of(1, (12, 6), 90.0, 8.0, True)
     buf = np.zeros((400, 2), dtype=np.int64)
     pose = CameraPose(2, 3, 2, 30, 0, 10)
-    n = footprint_cells(lens, pose, np.zeros((0, 4)), occluding, buf)
+    n = footprint_cells(lens, pose, np.zeros((0, 4)), occluding, NO_GROUND, buf)
     seen = {tuple(r) for r in buf[:n]}
-    open_n = footprint_cells(lens, pose, np.zeros((0, 4)), occluding[:0, :0, :0], buf)
+    open_n = footprint_cells(lens, pose, np.zeros((0, 4)), occluding[:0, :0, :0], NO_GROUND, buf)
     assert n < open_n and not any(i > 5 for i, _ in seen)
 
 

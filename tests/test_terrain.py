@@ -335,3 +335,53 @@ def test_too_little_clearance_and_a_flat_amsl_frame_are_refused(tmp_path: Path) 
                 str(config), "--out", str(out))  # fmt: skip
     one_error_line(proc, "mission.altitude_frame=amsl", "flat ground")
     assert not out.exists()
+
+
+# -- the grid's rules over terrain ------------------------------------------------------------
+def test_a_level_move_over_terrain_pays_its_climb_or_descent() -> None:
+    from pirl.env.vcpp_env import VCPPEnv
+    from pirl.world.dynamics import X_MINUS, X_PLUS
+
+    cfg = with_site(VCPPConfig(), str(HILLS)).replace(wind_prob=0.0, stall_guard=0)
+    site = load_site(HILLS)
+    ground = site.terrain / site.level_height_m
+    env = VCPPEnv(cfg)
+    env.reset(seed=0)
+    w = env.world
+    x, y, z = w.position(0)
+    assert (x, y) == (10, 20)
+    for action, dx in ((X_PLUS, 1), (X_MINUS, -1)):
+        x, y, _ = w.position(0)
+        before = float(w.energy[0])
+        env.step(action)
+        rise = ground[x + dx, y] - ground[x, y]
+        climb = rise * cfg.energy_climb if rise > 0 else -rise * cfg.energy_descend
+        spent = before - float(w.energy[0])
+        assert spent == pytest.approx(cfg.energy_move + climb + cfg.energy_hover, abs=1e-9)
+        assert abs(rise) > 0.05  # the start lies on a slope: the terrain's part is real
+
+
+def test_a_ridge_hides_the_valley_behind_it_and_a_slope_hides_nothing() -> None:
+    from pirl.world.footprint import NO_VOXELS, CameraPose, footprint_cells, lens_of
+
+    lens = lens_of(1, (30, 9), 90.0, 12.0, True)
+    buf = np.zeros((2000, 2), dtype=np.int64)
+    pose = CameraPose(3, 4, 0, 40, 0, 10)  # level 0, looking east at a low angle
+    no_spheres = np.zeros((0, 4))
+    flat = np.zeros((30, 9))
+    seen_flat = {
+        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, flat, buf)]
+    }
+    ridge = flat.copy()
+    ridge[8, :] = 4.0  # four levels high, one cell wide, between the camera and x > 8
+    seen_ridge = {
+        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, ridge, buf)]
+    }
+    behind = {c for c in seen_flat if c[0] > 9}
+    assert behind and not (behind & seen_ridge)
+    assert {c for c in seen_flat if c[0] < 8} <= seen_ridge
+    slope = np.repeat(np.arange(30.0)[:, None] * 0.5, 9, axis=1)  # uniform: 0.5 levels a cell
+    seen_slope = {
+        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, slope, buf)]
+    }
+    assert seen_slope == seen_flat

@@ -25,6 +25,7 @@ import numba
 import numpy as np
 
 from pirl.world.footprint import (
+    NO_GROUND,
     PAPER,
     CameraPose,
     footprint_cells,
@@ -48,10 +49,10 @@ def footprint_cells_pose(lens, pose, obstacles, occluding, out):
             int(math.floor(pose.x + 0.5)), int(math.floor(pose.y + 0.5)), 0,
             int(math.floor(pose.tilt + 0.5)), 0, pose.zoom10,
         )  # fmt: skip
-        return footprint_cells(lens, cell, obstacles, occluding, out)
+        return footprint_cells(lens, cell, obstacles, occluding, NO_GROUND, out)
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, NO_GROUND, out)
 
 
 def body_rotation(rpy: np.ndarray) -> np.ndarray:

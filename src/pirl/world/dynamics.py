@@ -184,8 +184,9 @@ def observe(w, p, e, mark_redundant):
     buf = w.buf[e]
     g = world_of(w, e)
     n = footprint_cells(
-        p, camera_pose(w, e), w.obstacles[g, : st["n_obstacles"]], w.occluding[g], buf
-    )
+        p, camera_pose(w, e), w.obstacles[g, : st["n_obstacles"]], w.occluding[g], w.ground[g],
+        buf,
+    )  # fmt: skip
     st["footprint_sum"] += n
     w.seen_now[e] = n
     return book_view(w, e, buf[:n], mark_redundant)
@@ -500,6 +501,7 @@ def step_one(w, p, e, a):
     evaluation shares.
     """
     st = w.status[e]
+    g = world_of(w, e)
     x, y, z = st["x"], st["y"], st["z"]
     tilt, pan, zoom = st["tilt"], st["pan"], st["zoom10"]
     collision = False
@@ -516,6 +518,11 @@ def step_one(w, p, e, a):
             collision = True
         if a < Z_PLUS:
             used = p.energy_move
+            if w.ground.shape[1] > 0 and (st["x"] != x or st["y"] != y):
+                # Over terrain a level move climbs or descends with the ground, paid as the
+                # level moves are, per level of height (docs/sites.md).
+                rise = w.ground[g, st["x"], st["y"]] - w.ground[g, x, y]
+                used += rise * p.energy_climb if rise > 0 else -rise * p.energy_descend
         elif a == Z_PLUS:
             used = p.energy_climb
         else:

@@ -40,6 +40,8 @@ def footprint_model(name: str) -> int:
 
 
 NO_VOXELS = np.zeros((0, 0, 0), dtype=np.bool_)
+NO_GROUND = np.zeros((0, 0), dtype=np.float64)
+"""The ground of a flat world (no terrain): nothing of it hides anything."""
 """The occluding grid of a footprint without voxels (:func:`footprint_cells`)."""
 
 
@@ -203,14 +205,47 @@ def _occluded_voxels(cx, cy, cz, gx, gy, occluding):
 
 
 @numba.njit(cache=True)
-def footprint_cells(lens, pose, obstacles, occluding, out):
+def _occluded_ground(cx, cy, cz, gx, gy, ground):
+    """True when the terrain rises above the segment camera -> ground cell centre: a ridge
+    between them. ``ground`` is the terrain in levels at cell centres (integer coordinates,
+    the voxels' convention); the camera is ``cz + 1`` levels above the ground under it, the
+    target on its own ground. Between cell centres the terrain is bilinear, so a uniform
+    slope never hides its own cells; the segment is sampled every half cell."""
+    sx, sy = ground.shape
+    top = ground[cx, cy] + cz + 1.0  # heights from the ground plane at level -1
+    bottom = ground[gx, gy]
+    dx, dy = gx - cx, gy - cy
+    n = int(math.ceil(2.0 * math.sqrt(dx * dx + dy * dy)))
+    for s in range(1, n):
+        t = s / n
+        px, py = cx + t * dx, cy + t * dy
+        i0 = min(max(int(math.floor(px)), 0), sx - 1)
+        j0 = min(max(int(math.floor(py)), 0), sy - 1)
+        i1, j1 = min(i0 + 1, sx - 1), min(j0 + 1, sy - 1)
+        fx, fy = min(max(px - i0, 0.0), 1.0), min(max(py - j0, 0.0), 1.0)
+        g = (ground[i0, j0] * (1 - fx) + ground[i1, j0] * fx) * (1 - fy) + (
+            ground[i0, j1] * (1 - fx) + ground[i1, j1] * fx
+        ) * fy
+        if top + t * (bottom - top) < g - 1e-9:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def footprint_cells(lens, pose, obstacles, occluding, ground, out):
     """Write the ground cells ``pose`` sees through ``lens`` as rows (i, j) of ``out``; return
     their count.
 
     ``lens`` is a :class:`Lens` or a tuple with its fields (a world's ``Params``); ``pose`` a
     grid :class:`CameraPose` (integers); ``obstacles`` the rows (cx, cy, cz, r) that may
     occlude; ``occluding`` the (X, Y, Z) voxels that occlude when there are no spheres (a
-    (0, 0, 0) array for none). ``out`` must hold at least :func:`buffer_rows` rows.
+    (0, 0, 0) array for none); ``ground`` a site's terrain in levels (:data:`NO_GROUND` for
+    flat ground), which hides what lies behind a ridge. ``out`` must hold at least
+    :func:`buffer_rows` rows.
+
+    Over terrain the voxels are stacked on each cell's own ground, and the footprint is
+    projected on a plane at the ground under the camera: its scale follows the height above
+    that cell (docs/sites.md measures the error against an exact projection).
     """
     if lens.model == PAPER:
         n = 0
@@ -224,11 +259,11 @@ def footprint_cells(lens, pose, obstacles, occluding, out):
         return n
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, ground, out)
 
 
 @numba.njit(cache=True)
-def frustum_scan(lens, pose, poly, obstacles, occluding, out):
+def frustum_scan(lens, pose, poly, obstacles, occluding, ground, out):
     """Write the ground cells inside ground polygon ``poly`` (seen from ``pose``, occluded by
     ``obstacles``, or by ``occluding`` voxels where there are no spheres, when the lens says
     so) as rows of ``out``; return their count."""
@@ -246,6 +281,10 @@ def frustum_scan(lens, pose, poly, obstacles, occluding, out):
                         if _occluded(pose.x, pose.y, pose.z, i, j, obstacles):
                             continue
                     elif _occluded_voxels(pose.x, pose.y, pose.z, i, j, occluding):
+                        continue
+                    if ground.shape[0] > 0 and _occluded_ground(
+                        int(pose.x), int(pose.y), pose.z, i, j, ground
+                    ):
                         continue
                 out[n, 0] = i
                 out[n, 1] = j
@@ -272,7 +311,7 @@ def max_footprint_cells(model: int, size_z: int, fov_deg: float, max_range: floa
             for pan in (0, 45):
                 for zoom10 in range(5, 21):
                     pose = CameraPose(span, span, z, tilt, pan, zoom10)
-                    best = max(best, footprint_cells(lens, pose, empty, no_voxels, out))
+                    best = max(best, footprint_cells(lens, pose, empty, no_voxels, NO_GROUND, out))
     return best
 
 

@@ -23,6 +23,9 @@ class MapGrids(NamedTuple):
     """Coverable cells of the site, seeable or not (the denominator of ``vcr_all``)."""
     starts: np.ndarray
     """(k, 3) start cells; a seeded reset draws one."""
+    ground: np.ndarray | None = None
+    """(X, Y) the terrain in levels (metres / ``level_height_m``) where the site has a
+    terrain model; None on flat ground."""
 
 
 __all__ = ["MapGrids"]

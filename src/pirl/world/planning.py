@@ -19,6 +19,7 @@ import numpy as np
 from pirl.config.world import VCPPConfig
 from pirl.world import dynamics as D
 from pirl.world.footprint import (
+    NO_GROUND,
     CameraPose,
     buffer_rows,
     footprint_cells,
@@ -44,6 +45,7 @@ class WorldView:
     views: np.ndarray
     obstacles: np.ndarray
     occluding: np.ndarray
+    ground: np.ndarray
     position: Cell
     camera: Camera
     energy: float
@@ -61,6 +63,7 @@ class WorldView:
             views=take(world.views[g]),
             obstacles=world.obstacle_list(e),
             occluding=take(world.occluding[g]),
+            ground=take(world.ground[g]),
             position=world.position(e),
             camera=world.camera_setting(e),
             energy=float(world.energy[e]),
@@ -74,8 +77,9 @@ class WorldView:
         buf = np.empty((buffer_rows(model, cfg.max_range), 2), dtype=np.int64)
         at = CameraPose(*(int(v) for v in pose), *(int(v) for v in camera))
         n = footprint_cells(
-            lens, at, np.asarray(self.obstacles, dtype=np.float64), self.occluding, buf
-        )
+            lens, at, np.asarray(self.obstacles, dtype=np.float64), self.occluding, self.ground,
+            buf,
+        )  # fmt: skip
         return buf[:n]
 
     def useful(self, pose: Cell, camera: Camera) -> bool:
@@ -156,7 +160,7 @@ def _largest_footprint_camera(cfg: VCPPConfig, z: int, camera: Camera) -> tuple[
     tilt0, pan0, zoom0 = camera
     empty = WorldView(
         cfg, np.zeros((0, 0, 0), bool), np.zeros((0, 0), bool), np.zeros((0, 0), np.int32),
-        np.zeros((0, 4)), np.zeros((0, 0, 0), bool), (0, 0, z), camera, 0.0,
+        np.zeros((0, 4)), np.zeros((0, 0, 0), bool), NO_GROUND, (0, 0, z), camera, 0.0,
     )  # fmt: skip
     centre = (sx // 2, sy // 2)
     altitudes = [z] if cfg.footprint == "paper" else range(sz)

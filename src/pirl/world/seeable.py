@@ -28,6 +28,7 @@ from pirl.config import grid
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.world.footprint import (
+    NO_GROUND,
     NO_VOXELS,
     PAPER,
     PAPER_MAX_HALF,
@@ -90,7 +91,7 @@ def _reach(blocked, starts):
 
 
 @numba.njit(cache=True)
-def _union_views(lens, sources, occluding, target, poses, reach, out):
+def _union_views(lens, sources, occluding, ground, target, poses, reach, out):
     """Mark in ``out`` the ``target`` cells some pose of some ``sources`` cell sees."""
     sx, sy, sz = sources.shape
     buf = np.empty((out.shape[0] * out.shape[1] + 1, 2), dtype=np.int64)
@@ -112,7 +113,7 @@ def _union_views(lens, sources, occluding, target, poses, reach, out):
                         continue
                     for p in range(poses.shape[0]):
                         pose = CameraPose(x, y, z, poses[p, 0], poses[p, 1], poses[p, 2])
-                        n = footprint_cells(lens, pose, empty, occluding, buf)
+                        n = footprint_cells(lens, pose, empty, occluding, ground, buf)
                         for r in range(n):
                             i, j = buf[r, 0], buf[r, 1]
                             if left[i, j]:
@@ -146,12 +147,13 @@ def analyse(site: Site, lens: Lens) -> Seeability:
     reach = PAPER_MAX_HALF if lens.model == PAPER else int(np.ceil(lens.max_range)) + 2
     poses = _poses(lens.model)
     occluding = site.occluding if lens.occlusion else NO_VOXELS
+    ground = site_ground(site) if lens.occlusion and site.has_terrain else NO_GROUND
     reachable = _reach(site.blocked, site.starts)
     buildings = site.occluding
     sets = []
     for sources in (reachable, ~site.blocked, ~buildings):
         out = np.zeros(target.shape, dtype=np.bool_)
-        _union_views(lens, sources, occluding, target, poses, reach, out)
+        _union_views(lens, sources, occluding, ground, target, poses, reach, out)
         sets.append(out & target)
     seen_reach, seen_allowed, seen_any = sets
     reason = np.full(target.shape, -1, dtype=np.int8)
@@ -178,8 +180,16 @@ def _grids(site: Site, lens: Lens) -> MapGrids:
         )
     # Starts the UAV cannot leave towards any view are kept: the episode still starts there.
     return MapGrids(
-        site.name, site.blocked, site.occluding, seen.seeable, seen.coverable, site.starts
-    )
+        site.name, site.blocked, site.occluding, seen.seeable, seen.coverable, site.starts,
+        site_ground(site),
+    )  # fmt: skip
+
+
+def site_ground(site: Site) -> np.ndarray | None:
+    """The site's terrain in levels (what the kernels take), None on flat ground."""
+    if not site.has_terrain:
+        return None
+    return np.ascontiguousarray(site.terrain / site.level_height_m)
 
 
 def _why(seen: Seeability) -> str:

@@ -62,7 +62,7 @@ FLAGS_DTYPE = np.dtype(
 STATE_ARRAYS = (
     "status", "energy", "rng", "blocked", "coverable", "views", "redmask", "visits", "blk_todo",
     "blk_total", "obstacles", "terms", "flags", "occluding", "coverable_all", "progress",
-    "guarded", "left", "credit", "seen_now", "yields", "clock", "seen_by", "near",
+    "guarded", "left", "credit", "seen_now", "yields", "clock", "seen_by", "near", "ground",
 )  # fmt: skip
 """The :class:`WorldArrays` fields that are state (what a checkpoint keeps); the others are
 lookups and scratch space derived from the config."""
@@ -72,6 +72,15 @@ def copy_records(records: np.ndarray) -> np.ndarray:
     """A read-only copy of a 1-D record array, made as bytes: numpy copies records field by
     field, ten times slower, and every step's info snapshot copies them."""
     return np.frombuffer(records.tobytes(), dtype=records.dtype)
+
+
+def _has_ground(cfg: VCPPConfig) -> bool:
+    """Whether ``cfg``'s world is a site with a terrain model."""
+    if not cfg.site:
+        return False
+    from pirl.world.site import load_site
+
+    return load_site(cfg.site).has_terrain
 
 
 class WorldArrays(NamedTuple):
@@ -110,6 +119,10 @@ class WorldArrays(NamedTuple):
     occluding: np.ndarray
     """(N, X, Y, Z) cells that hide the ground behind them where a world has no spheres (a
     site's buildings); equal to ``blocked`` in a sphere world, whose spheres occlude exactly."""
+    ground: np.ndarray
+    """(N, X, Y) a site's terrain in levels (``MapGrids.ground``): a move over it costs its
+    climb or descent, and a ridge hides what lies behind it; (N, 0, 0) on flat ground, where
+    no rule reads it."""
     coverable_all: np.ndarray
     """(N,) coverable cells of the world's site, seeable or not (= the coverable count of a
     sphere world)."""
@@ -276,6 +289,7 @@ class WorldBatch:
             blk_total=np.zeros((num, g, g), dtype=np.int32),
             obstacles=np.zeros((num, self.max_obstacles, 4), dtype=np.float64),
             occluding=np.zeros((num, sx, sy, sz), dtype=np.bool_),
+            ground=np.zeros((num, sx, sy) if _has_ground(cfg) else (num, 0, 0)),
             coverable_all=np.zeros(num, dtype=np.int64),
             progress=np.zeros(slots, dtype=np.int64),
             guarded=np.zeros(slots, dtype=np.int64),
@@ -320,7 +334,7 @@ class WorldBatch:
         """Put a :meth:`state_dict` back (into this batch's own arrays, which stay in place)."""
         # Arrays added after a checkpoint's version start at their reset values.
         later = {"progress", "guarded", "left", "credit", "seen_now", "yields", "clock"}
-        later |= {"seen_by", "near"}
+        later |= {"seen_by", "near", "ground"}
         missing = set(STATE_ARRAYS) - set(state) - later
         if missing:
             raise ValueError(f"world state lacks {sorted(missing)}")
@@ -375,6 +389,8 @@ class WorldBatch:
         w.obstacles[e] = 0.0
         w.obstacles[e, :n] = scenario.obstacles
         w.blocked[e] = blocked
+        if w.ground.shape[1]:
+            w.ground[e] = grids.ground if grids is not None and grids.ground is not None else 0.0
         if grids is not None:
             w.occluding[e] = grids.occluding
             w.coverable[e] = grids.coverable
@@ -419,7 +435,9 @@ class WorldBatch:
         buf = np.empty_like(self.buf[e])
         at = CameraPose(int(x), int(y), int(z), int(tilt), int(pan), int(zoom10))
         g = self.world_of(e)
-        n = footprint_cells(self.lens, at, self.obstacle_list(e), self.occluding[g], buf)
+        n = footprint_cells(
+            self.lens, at, self.obstacle_list(e), self.occluding[g], self.ground[g], buf
+        )
         return buf[:n].copy()
 
     def covered(self, e: int) -> np.ndarray:
