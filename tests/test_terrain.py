@@ -361,27 +361,51 @@ def test_a_level_move_over_terrain_pays_its_climb_or_descent() -> None:
         assert abs(rise) > 0.05  # the start lies on a slope: the terrain's part is real
 
 
-def test_a_ridge_hides_the_valley_behind_it_and_a_slope_hides_nothing() -> None:
+def _pyramid(pose, ground: np.ndarray, fov: float, max_range: float) -> set:
+    """Cells whose centre on the terrain lies in the camera's pyramid (no occlusion)."""
+    import math
+
+    t, p = math.radians(pose.tilt), math.radians(pose.pan)
+    th = math.tan(math.radians(fov) / 2) / (pose.zoom10 / 10)
+    f = np.array([math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)])
+    r = np.array([math.sin(p), -math.cos(p), 0.0])
+    u = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+    cam = np.array([pose.x, pose.y, pose.z + ground[pose.x, pose.y]])
+    out = set()
+    for i in range(ground.shape[0]):
+        for j in range(ground.shape[1]):
+            d = np.array([i, j, ground[i, j] - 1.0]) - cam
+            a = d @ f
+            inside = a > 0 and abs(d @ r) <= th * a and abs(d @ u) <= 0.75 * th * a
+            if inside and math.hypot(d[0], d[1]) <= max_range:
+                out.add((i, j))
+    return out
+
+
+def test_the_frustum_over_terrain_is_projected_on_the_ground_and_a_ridge_hides() -> None:
     from pirl.world.footprint import NO_VOXELS, CameraPose, footprint_cells, lens_of
 
     lens = lens_of(1, (30, 9), 90.0, 12.0, True)
     buf = np.zeros((2000, 2), dtype=np.int64)
-    pose = CameraPose(3, 4, 0, 40, 0, 10)  # level 0, looking east at a low angle
     no_spheres = np.zeros((0, 4))
-    flat = np.zeros((30, 9))
-    seen_flat = {
-        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, flat, buf)]
-    }
-    ridge = flat.copy()
-    ridge[8, :] = 4.0  # four levels high, one cell wide, between the camera and x > 8
-    seen_ridge = {
-        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, ridge, buf)]
-    }
-    behind = {c for c in seen_flat if c[0] > 9}
-    assert behind and not (behind & seen_ridge)
-    assert {c for c in seen_flat if c[0] < 8} <= seen_ridge
-    slope = np.repeat(np.arange(30.0)[:, None] * 0.5, 9, axis=1)  # uniform: 0.5 levels a cell
-    seen_slope = {
-        tuple(c) for c in buf[: footprint_cells(lens, pose, no_spheres, NO_VOXELS, slope, buf)]
-    }
-    assert seen_slope == seen_flat
+
+    def seen(pose: CameraPose, ground: np.ndarray) -> set:
+        n = footprint_cells(lens, pose, no_spheres, NO_VOXELS, ground, buf)
+        return {(int(a), int(b)) for a, b in buf[:n]}
+
+    # A uniform slope hides nothing: the footprint is exactly the cells in the pyramid, and
+    # looking uphill it is smaller than over flat ground (the ground comes nearer).
+    slope = np.repeat(np.arange(30.0)[:, None] * 0.5, 9, axis=1)  # 0.5 levels a cell, east up
+    for pose in (CameraPose(3, 4, 1, 40, 0, 10), CameraPose(20, 4, 2, 90, 0, 10),
+                 CameraPose(20, 4, 0, 50, 180, 12)):  # fmt: skip
+        assert seen(pose, slope) == _pyramid(pose, slope, 90.0, 12.0), pose
+    uphill = CameraPose(3, 4, 1, 40, 0, 10)
+    flat = np.full((30, 9), 1e-3)  # a ground model that is flat (still projected per cell)
+    assert len(seen(uphill, slope)) < len(seen(uphill, flat))
+    # A ridge four levels high at x = 8 hides the valley behind it.
+    pose = CameraPose(3, 4, 0, 40, 0, 10)
+    ridge = np.zeros((30, 9))
+    ridge[8, :] = 4.0
+    behind = {c for c in _pyramid(pose, ridge, 90.0, 12.0) if c[0] > 9}
+    assert behind and not (behind & seen(pose, ridge))
+    assert {c for c in _pyramid(pose, ridge, 90.0, 12.0) if c[0] < 8} <= seen(pose, ridge)

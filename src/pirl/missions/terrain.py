@@ -17,6 +17,8 @@ one line, naming where.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -140,13 +142,14 @@ _STEPS = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
 """Grid moves, level moves last: a way home changes level only where it must."""
 
 
-def check_profile(parts: list[Sortie], geo: Geo, s: MissionSettings) -> dict[str, Any]:
-    """Sample every leg of every sortie every metre (the straight line between waypoints, the
-    take-off's climb at home included) against the site's own terrain and surface; refuse a
-    plan closer than ``mission.min_clearance_m`` to the surface. Returns the figures that
-    ``summary.json`` keeps under ``terrain``."""
+def sampled_legs(
+    parts: list[Sortie], geo: Geo
+) -> Iterator[tuple[int, int, bool, int, np.ndarray, np.ndarray, np.ndarray]]:
+    """Every leg of every sortie sampled every metre: (sortie, item, level leg, level, x, y,
+    height above sea level). A leg is the straight line an autopilot flies between waypoints
+    (in the terrain frame a level leg holds its height above the ground instead); the first
+    starts above home at the take-off's level."""
     home = geo.home_point
-    worst_clearance, worst_error, samples = math.inf, 0.0, 0
     for n, sortie in enumerate(parts, start=1):
         where: Point | None = None
         for k, item in enumerate(sortie.items, start=1):
@@ -155,26 +158,35 @@ def check_profile(parts: list[Sortie], geo: Geo, s: MissionSettings) -> dict[str
             to = item.point() if item.kind == "waypoint" else (home[0], home[1], item.cell[2])
             a = where or (home[0], home[1], to[2])
             t, x, y = _samples(a, to, geo.georef.cell_size_m)
-            if geo.frame == "terrain" and a[2] == to[2]:  # the autopilot holds its height
+            level = a[2] == to[2]
+            if geo.frame == "terrain" and level:
                 alt = geo.ground.terrain(x, y) + geo.agl(to[2])
-            else:  # a straight line between the waypoints
+            else:
                 alt = geo.amsl(a) + t * (geo.amsl(to) - geo.amsl(a))
-            clearance = alt - geo.ground.surface(x, y)
-            samples += len(t)
-            low = int(clearance.argmin())
-            if clearance[low] < s.min_clearance_m:
-                lat, lon, _ = geo.position((0, 0, to[2]), xy=(float(x[low]), float(y[low])))
-                raise ConfigError(
-                    f"mission.min_clearance_m={s.min_clearance_m:g}: sortie {n}, item {k} "
-                    f"passes {clearance[low]:.1f} m above the surface model at lat {lat:.6f}, "
-                    f"lon {lon:.6f}; fly higher levels or raise site.level_height_m; nothing "
-                    "written"
-                )
-            worst_clearance = min(worst_clearance, float(clearance[low]))
-            if a[2] == to[2] and geo.frame != "terrain":
-                agl = alt - geo.ground.terrain(x, y)
-                worst_error = max(worst_error, float(np.abs(agl - geo.agl(to[2])).max()))
+            yield n, k, level, to[2], x, y, alt
             where = to
+
+
+def check_profile(parts: list[Sortie], geo: Geo, s: MissionSettings) -> dict[str, Any]:
+    """Sample every leg of every sortie every metre (:func:`sampled_legs`) against the site's
+    own terrain and surface; refuse a plan closer than ``mission.min_clearance_m`` to the
+    surface. Returns the figures that ``summary.json`` keeps under ``terrain``."""
+    worst_clearance, worst_error, samples = math.inf, 0.0, 0
+    for n, k, level, z, x, y, alt in sampled_legs(parts, geo):
+        clearance = alt - geo.ground.surface(x, y)
+        samples += len(x)
+        low = int(clearance.argmin())
+        if clearance[low] < s.min_clearance_m:
+            lat, lon, _ = geo.position((0, 0, z), xy=(float(x[low]), float(y[low])))
+            raise ConfigError(
+                f"mission.min_clearance_m={s.min_clearance_m:g}: sortie {n}, item {k} passes "
+                f"{clearance[low]:.1f} m above the surface model at lat {lat:.6f}, lon "
+                f"{lon:.6f}; fly higher levels or raise site.level_height_m; nothing written"
+            )
+        worst_clearance = min(worst_clearance, float(clearance[low]))
+        if level and geo.frame != "terrain":
+            agl = alt - geo.ground.terrain(x, y)
+            worst_error = max(worst_error, float(np.abs(agl - geo.agl(z)).max()))
     return {
         "frame": geo.frame,
         "tolerance_m": s.terrain_tolerance_m,
@@ -182,7 +194,44 @@ def check_profile(parts: list[Sortie], geo: Geo, s: MissionSettings) -> dict[str
         "min_clearance_m": round(worst_clearance, 2),
         "samples": samples,
         "sample_every_m": SAMPLE_M,
+        "inserted_points": sum(1 for sortie in parts for i in sortie.items if i.xy is not None),
     }
+
+
+def profile_figure(parts: list[Sortie], geo: Geo, path: Path) -> Path:
+    """``profile.png``: the flight's height above sea level along its path against the
+    terrain (DTM) and the surface (DSM) under it, sortie after sortie. Written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pirl._atomic import replacing
+
+    dist, alt, ground, surface = [], [], [], []
+    along = 0.0
+    for *_, x, y, a in sampled_legs(parts, geo):
+        step = np.hypot(np.diff(x, prepend=x[0]), np.diff(y, prepend=y[0]))
+        dist.append(along + np.cumsum(step) * geo.georef.cell_size_m)
+        along = float(dist[-1][-1])
+        alt.append(a)
+        ground.append(geo.ground.terrain(x, y))
+        surface.append(geo.ground.surface(x, y))
+    d, a, g, sf = (np.concatenate(v) for v in (dist, alt, ground, surface))
+    fig, ax = plt.subplots(figsize=(10, 3.2), dpi=110)
+    ax.fill_between(d, g.min() - 5, sf, color="#bbbbbb", label="surface (DSM)", step="mid")
+    ax.fill_between(d, g.min() - 5, g, color="#8c6d46", label="terrain (DTM)")
+    ax.plot(d, a, color="#1f5fbf", lw=0.9, label=f"flight ({geo.frame} frame)")
+    ax.set_xlim(0, d[-1])
+    ax.set_ylim(g.min() - 5, max(a.max(), sf.max()) + 5)
+    ax.set_xlabel("metres flown (horizontally)")
+    ax.set_ylabel("metres above sea level")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    with replacing(Path(path)) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)
 
 
 __all__ = [
@@ -191,5 +240,7 @@ __all__ = [
     "altitude_frame",
     "check_profile",
     "follow_ground",
+    "profile_figure",
+    "sampled_legs",
     "via_points",
 ]

@@ -33,7 +33,7 @@ from pirl.config.world import VCPPConfig
 from pirl.missions.formats import fences, geojson, kml, mavlink_items, plan_json, write_waypoints
 from pirl.missions.items import Episode, Geo, Item, Point, Sortie, Step
 from pirl.missions.staging import host_name, remove_stale_staging
-from pirl.missions.terrain import check_profile, follow_ground
+from pirl.missions.terrain import check_profile, follow_ground, profile_figure
 
 
 def file_digest(path: Path) -> str:
@@ -415,6 +415,8 @@ def write_files(
         f"NOT A REAL PLACE: a generated world placed at {DEFAULT_ORIGIN} (PX4's simulated home)"
     )  # fmt: skip
     (folder / "path.kml").write_text(kml(features, name, f"{what}; {where}"))
+    if geo.ground is not None:
+        profile_figure(parts, geo, folder / "profile.png")
     m = ep.metrics
     cells = [ep.start, *(s.cell for s in ep.steps)]
     summary = {

@@ -52,7 +52,7 @@ def footprint_cells_pose(lens, pose, obstacles, occluding, out):
         return footprint_cells(lens, cell, obstacles, occluding, NO_GROUND, out)
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, occluding, NO_GROUND, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
 
 
 def body_rotation(rpy: np.ndarray) -> np.ndarray:

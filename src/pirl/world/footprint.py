@@ -243,9 +243,8 @@ def footprint_cells(lens, pose, obstacles, occluding, ground, out):
     flat ground), which hides what lies behind a ridge. ``out`` must hold at least
     :func:`buffer_rows` rows.
 
-    Over terrain the voxels are stacked on each cell's own ground, and the footprint is
-    projected on a plane at the ground under the camera: its scale follows the height above
-    that cell (docs/sites.md measures the error against an exact projection).
+    Over terrain the frustum is projected exactly on each cell's own ground
+    (:func:`frustum_over_ground`); the voxels of buildings stand on their cells' ground.
     """
     if lens.model == PAPER:
         n = 0
@@ -257,13 +256,54 @@ def footprint_cells(lens, pose, obstacles, occluding, ground, out):
                 out[n, 1] = j
                 n += 1
         return n
+    if ground.shape[0] > 0:
+        return frustum_over_ground(lens, pose, occluding, ground, out)
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
-    return frustum_scan(lens, pose, poly, obstacles, occluding, ground, out)
+    return frustum_scan(lens, pose, poly, obstacles, occluding, out)
 
 
 @numba.njit(cache=True)
-def frustum_scan(lens, pose, poly, obstacles, occluding, ground, out):
+def frustum_over_ground(lens, pose, occluding, ground, out):
+    """The frustum's cells over terrain, projected exactly: every ground cell within
+    ``max_range`` (horizontally) whose centre, on its own terrain, lies inside the camera's
+    pyramid; with occlusion, hidden by a ridge (:func:`_occluded_ground`) or by the voxels of
+    buildings, marched as over flat ground (the ray's height above the ground taken to fall
+    evenly from the camera's to the target's). Writes rows of ``out``; returns their count."""
+    t = math.radians(pose.tilt)
+    p = math.radians(pose.pan)
+    th = math.tan(math.radians(lens.fov_deg) / 2.0) / (pose.zoom10 / 10.0)
+    tv = th * 0.75
+    fx, fy, fz = math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)
+    rx, ry = math.sin(p), -math.cos(p)
+    ux, uy, uz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
+    cz = pose.z + ground[pose.x, pose.y]
+    reach = int(math.floor(lens.max_range))
+    n = 0
+    for i in range(max(0, pose.x - reach), min(lens.size_x, pose.x + reach + 1)):
+        for j in range(max(0, pose.y - reach), min(lens.size_y, pose.y + reach + 1)):
+            dx, dy = float(i - pose.x), float(j - pose.y)
+            if dx * dx + dy * dy > lens.max_range * lens.max_range:
+                continue
+            dz = ground[i, j] - 1.0 - cz
+            a = dx * fx + dy * fy + dz * fz
+            if a <= 1e-9:
+                continue
+            if abs(dx * rx + dy * ry) > th * a or abs(dx * ux + dy * uy + dz * uz) > tv * a:
+                continue
+            if lens.occlusion:
+                if _occluded_voxels(pose.x, pose.y, pose.z, i, j, occluding):
+                    continue
+                if _occluded_ground(pose.x, pose.y, pose.z, i, j, ground):
+                    continue
+            out[n, 0] = i
+            out[n, 1] = j
+            n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def frustum_scan(lens, pose, poly, obstacles, occluding, out):
     """Write the ground cells inside ground polygon ``poly`` (seen from ``pose``, occluded by
     ``obstacles``, or by ``occluding`` voxels where there are no spheres, when the lens says
     so) as rows of ``out``; return their count."""
@@ -281,10 +321,6 @@ def frustum_scan(lens, pose, poly, obstacles, occluding, ground, out):
                         if _occluded(pose.x, pose.y, pose.z, i, j, obstacles):
                             continue
                     elif _occluded_voxels(pose.x, pose.y, pose.z, i, j, occluding):
-                        continue
-                    if ground.shape[0] > 0 and _occluded_ground(
-                        int(pose.x), int(pose.y), pose.z, i, j, ground
-                    ):
                         continue
                 out[n, 0] = i
                 out[n, 1] = j
