@@ -73,7 +73,7 @@ def first(doc: dict, command: int) -> dict:
         (lambda d: d.update(fileType="GeoFence"), ["fileType: 'GeoFence', not 'Plan'"]),
         # above terrain, on a world without a ground model
         (lambda d: first(d, mav.MAV_CMD_NAV_WAYPOINT).update(frame=10),
-         ["frame: 10 (above terrain) needs the site's ground model"]),
+         ["frame: 10 (above terrain) needs a site with a terrain model"]),
         # a waypoint moved off the world
         (lambda d: first(d, mav.MAV_CMD_NAV_WAYPOINT)["params"].__setitem__(6, 400.0),
          ["400 m above home lies outside the 10x10x3 world"]),

@@ -193,12 +193,35 @@ def test_bad_ground_models_are_refused_in_one_line(tmp_path: Path, name: str) ->
         assert not out.exists()
 
 
-def test_the_physics_simulation_refuses_a_terrain_site() -> None:
+def test_pyflyt_stands_the_terrain_where_the_grid_has_it() -> None:
+    """The heightfield's surface, found by PyBullet's own ray test, is the site's terrain at
+    each cell centre (in the physics' metres, its lowest point at 0)."""
+    from pirl.config.physics import PhysicsConfig
     from pirl.physics.flight import Mission
+    from pirl.physics.pyflyt_backend import PyFlytFlight
 
-    cfg = with_site(VCPPConfig(), str(HILLS))
-    with pytest.raises(ConfigError, match="flies flat ground only"):
-        Mission(cfg)
+    cfg = with_site(VCPPConfig(), str(HILLS)).replace(wind_prob=0.0)
+    mission = Mission(cfg, PhysicsConfig())
+    mission.reset(seed=0)
+    flight = PyFlytFlight(mission)
+    site = load_site(HILLS)
+    expected = (site.terrain - site.terrain.min()) / site.level_height_m  # 1 m levels here
+    for i, j in ((1, 1), (30, 8), (20, 5), (35, 30), (44, 12)):
+        hit = flight.aviary.rayTest([i + 0.01, j + 0.01, 500.0], [i + 0.01, j + 0.01, -50.0])[0]
+        assert hit[0] == flight.sphere_ids[0], (i, j, hit)
+        assert hit[3][2] == pytest.approx(expected[i, j], abs=0.05), (i, j)
+    start = mission.cell_position(mission.start)
+    assert start[2] == pytest.approx(expected[10, 20] + 1.0)  # level 0: one level above it
+
+
+def test_the_terrain_mission_flies_back_in_pyflyt(hills_plan: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "hills"
+    shutil.copytree(hills_plan, folder)
+    proc = pirl("fly", str(folder))
+    assert proc.returncode == 0, proc.stderr
+    flown = json.loads((folder / "flown.json").read_text())
+    assert abs(flown["vcr"] - flown["vcr_grid"]) <= 0.03, flown
+    assert flown["contacts"] == 0 and flown["recoveries"] == 0, flown
 
 
 def test_example_sites_file_is_current() -> None:

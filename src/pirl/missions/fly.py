@@ -141,32 +141,47 @@ def _edited(folder: Path, summary: dict[str, Any]) -> tuple[list[str], list[str]
     return changed + gone, lines
 
 
-def _cell(geo: Geo, lat: float, lon: float, alt: float, size: tuple[int, ...], where: str) -> Cell:
+def _cell(
+    geo: Geo, item: MissionItem, home: tuple[float, float, float], size: tuple[int, ...],
+    where: str,
+) -> Cell:  # fmt: skip
+    """The grid cell of a flown position: its map cell, and the level its height above the
+    ground (:func:`above_ground`) is nearest."""
+    lat, lon = item.params[4], item.params[5]
     x, y = geo.georef.cells_from_lonlat(np.array([lon]), np.array([lat]))
     if not (math.isfinite(x[0]) and math.isfinite(y[0])):
         raise UserError(f"{where}, position: lat {lat:.7f}, lon {lon:.7f} is off the grid's map")
-    cell = (int(math.floor(x[0])), int(math.floor(y[0])), round(alt / geo.level_m) - 1)
+    agl = above_ground(item, home, geo, float(x[0]), float(y[0]), where)
+    cell = (int(math.floor(x[0])), int(math.floor(y[0])), round(agl / geo.level_m) - 1)
     if not all(0 <= c < s for c, s in zip(cell, size, strict=True)):
         raise UserError(
-            f"{where}, position: lat {lat:.7f}, lon {lon:.7f}, {alt:g} m above home lies "
-            f"outside the {'x'.join(map(str, size))} world the mission was written for"
+            f"{where}, position: lat {lat:.7f}, lon {lon:.7f}, {agl:g} m above "
+            f"{'home' if geo.ground is None else 'the ground'} lies outside the "
+            f"{'x'.join(map(str, size))} world the mission was written for"
         )
     return cell
 
 
-def above_home(item: MissionItem, home: tuple[float, float, float], where: str) -> float:
-    """A flown position's altitude above home, metres, from its frame: relative (3) as it is,
-    above sea level (0) less home's altitude (``plannedHomePosition``, above sea level);
-    above terrain (10) needs a ground model, which no site carries yet."""
+def above_ground(
+    item: MissionItem, home: tuple[float, float, float], geo: Geo, x: float, y: float, where: str
+) -> float:
+    """A flown position's height above the ground under it, metres, from its frame. On flat
+    ground: relative (3) as it is, above sea level (0) less home's altitude
+    (``plannedHomePosition``). Over a site's terrain model (at grid point x, y): above sea
+    level less the terrain there, relative plus home's altitude less it, above terrain (10)
+    as it is. Above terrain on flat ground is refused: there is no ground model to read."""
     m = dialect()
     alt = item.params[6]
+    ground = None if geo.ground is None else float(geo.ground.terrain([x], [y])[0])
     if item.frame == m.MAV_FRAME_GLOBAL_RELATIVE_ALT:
-        return alt
+        return alt if ground is None else alt + home[2] - ground
     if item.frame == m.MAV_FRAME_GLOBAL:
-        return alt - home[2]
+        return alt - (home[2] if ground is None else ground)
+    if ground is not None:
+        return alt
     raise UserError(
-        f"{where}, frame: {item.frame} (above terrain) needs the site's ground model, and "
-        "pirl sites carry none yet; write it relative to home (3) or above sea level (0)"
+        f"{where}, frame: {item.frame} (above terrain) needs a site with a terrain model; this "
+        "one is flat ground: write it relative to home (3) or above sea level (0)"
     )
 
 
@@ -187,8 +202,7 @@ def mission_ops(
                 skipped[item.name] = skipped.get(item.name, 0) + 1
             continue
         if cmd in GOTO:
-            alt = above_home(item, mission.home, where)
-            ops.append(Op("goto", cell=_cell(geo, p[4], p[5], alt, size, where)))
+            ops.append(Op("goto", cell=_cell(geo, item, mission.home, size, where)))
             continue
         if cmd == m.MAV_CMD_SET_CAMERA_ZOOM:
             camera[2] = zoom10_from_percent(p[1])

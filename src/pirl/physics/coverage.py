@@ -30,19 +30,22 @@ from pirl.world.footprint import (
     CameraPose,
     footprint_cells,
     frustum_corners,
+    frustum_over_ground,
     frustum_scan,
 )
 
 
 @numba.njit(cache=True)
-def footprint_cells_pose(lens, pose, obstacles, occluding, out):
+def footprint_cells_pose(lens, pose, obstacles, occluding, ground, out):
     """Ground cells seen from a continuous :class:`~pirl.world.footprint.CameraPose`, written
     as rows (i, j) of ``out``; the count.
 
     ``pose.x, pose.y`` are in cell units (cell (i, j) is centred at (i, j)); ``pose.z`` is the
     height above the ground in cell units minus one (the grid's level convention, so level k
     is ``z = k``); tilt and pan are degrees (floats); ``obstacles`` in the same units;
-    ``occluding`` the world's voxels (used where there are no spheres).
+    ``occluding`` the world's voxels (used where there are no spheres); ``ground`` a site's
+    terrain in cell units (``NO_GROUND`` on flat ground), over which the frustum is projected
+    on each cell's own ground and ``pose.z`` is the height above the ground under the camera.
     """
     if lens.model == PAPER:
         cell = CameraPose(
@@ -50,6 +53,8 @@ def footprint_cells_pose(lens, pose, obstacles, occluding, out):
             int(math.floor(pose.tilt + 0.5)), 0, pose.zoom10,
         )  # fmt: skip
         return footprint_cells(lens, cell, obstacles, occluding, NO_GROUND, out)
+    if ground.shape[0] > 0:
+        return frustum_over_ground(lens, pose, occluding, ground, out)
     poly = np.empty((4, 2))
     frustum_corners(lens, pose, poly)
     return frustum_scan(lens, pose, poly, obstacles, occluding, out)

@@ -40,6 +40,7 @@ Rules (docs/physics.md):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,7 +54,7 @@ from pirl.env.info import InfoSnapshot
 from pirl.env.observation import build_observations, obs_layout, obs_size_for
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
-from pirl.world.footprint import PAPER, CameraPose, buffer_rows, footprint_model
+from pirl.world.footprint import NO_GROUND, PAPER, CameraPose, buffer_rows, footprint_model
 from pirl.world.metrics import episode_metrics
 from pirl.world.scenario import Scenario, draw_scenario
 from pirl.world.state import WorldBatch
@@ -126,18 +127,18 @@ class Mission:
     """One episode's grid-level state, advanced by a physics backend (see the module doc)."""
 
     def __init__(self, env_cfg: VCPPConfig, physics: PhysicsConfig | None = None) -> None:
+        self.cfg = env_cfg
+        self.physics = physics or PhysicsConfig()
+        # A site's terrain in metres of this flight, its lowest point at z = 0 (levels scale
+        # from the site's level height to the physics one, as the grid's levels do).
+        self.ground_m: np.ndarray | None = None
         if env_cfg.site:
             from pirl.world.site import load_site
 
             site = load_site(env_cfg.site)
             if site.has_terrain:
-                # PyFlyt's world here is flat ground with boxes: a hill would be flown as air.
-                raise ConfigError(
-                    f"site {site.name} has a terrain model: the physics simulation flies flat "
-                    "ground only (fly its mission in your own simulator; docs/sites.md)"
-                )
-        self.cfg = env_cfg
-        self.physics = physics or PhysicsConfig()
+                lifted = (site.terrain - site.terrain.min()) / site.level_height_m
+                self.ground_m = np.ascontiguousarray(lifted * self.physics.level_height_m)
         self.world = WorldBatch(env_cfg, 1)
         if self.world.step_limit < 1:
             raise ConfigError(
@@ -155,21 +156,42 @@ class Mission:
         p = self.physics
         self._camera_energy = env_cfg.energy_camera if p.camera_energy is None else p.camera_energy
         self._sample_period = 1.0 / p.sample_hz
+        # The footprint's ground: the terrain in horizontal cell sizes (its vertical unit).
+        self._ground = NO_GROUND if self.ground_m is None else self.ground_m / p.cell_size_m
         self.scenario: Scenario | None = None
         self.plan: StepPlan | None = None
 
     # -- geometry -------------------------------------------------------------------------
+    def ground_at(self, x: float, y: float) -> float:
+        """The ground's height in metres at grid point (x, y) (bilinear between cell centres;
+        0 on flat ground)."""
+        g = self.ground_m
+        if g is None:
+            return 0.0
+        sx, sy = g.shape
+        i0, j0 = min(max(int(math.floor(x)), 0), sx - 1), min(max(int(math.floor(y)), 0), sy - 1)
+        i1, j1 = min(i0 + 1, sx - 1), min(j0 + 1, sy - 1)
+        fx, fy = min(max(x - i0, 0.0), 1.0), min(max(y - j0, 0.0), 1.0)
+        return float(
+            (g[i0, j0] * (1 - fx) + g[i1, j0] * fx) * (1 - fy)
+            + (g[i0, j1] * (1 - fx) + g[i1, j1] * fx) * fy
+        )
+
     def cell_position(self, cell: Cell | np.ndarray) -> np.ndarray:
-        """Centre of ``cell`` in metres: (i, j) * cell size, (k + 1) * level height."""
+        """Centre of ``cell`` in metres: (i, j) * cell size, (k + 1) * level height above the
+        ground there."""
         p = self.physics
         i, j, k = (float(c) for c in cell)
-        return np.array([i * p.cell_size_m, j * p.cell_size_m, (k + 1.0) * p.level_height_m])
+        z = (k + 1.0) * p.level_height_m + self.ground_at(i, j)
+        return np.array([i * p.cell_size_m, j * p.cell_size_m, z])
 
     def cell_coords(self, position: np.ndarray) -> np.ndarray:
-        """Continuous grid coordinates (x, y, level) of a position in metres."""
+        """Continuous grid coordinates (x, y, level) of a position in metres (the level from
+        the height above the ground under it)."""
         p = self.physics
         x, y, z = (float(v) for v in position)
-        return np.array([x / p.cell_size_m, y / p.cell_size_m, z / p.level_height_m - 1.0])
+        x, y = x / p.cell_size_m, y / p.cell_size_m
+        return np.array([x, y, (z - self.ground_at(x, y)) / p.level_height_m - 1.0])
 
     def nearest_cell(self, position: np.ndarray) -> Cell:
         """The grid cell the drone is in: its position rounded (halves up), kept in the grid."""
@@ -201,6 +223,8 @@ class Mission:
         from pirl.world.boxes import merge_boxes
 
         c, lh = self.physics.cell_size_m, self.physics.level_height_m
+        if self.ground_m is not None:
+            return self._columns_m()
         boxes = merge_boxes(self.scenario.grids.occluding)
         out = np.zeros((len(boxes), 6))
         for n, (x0, y0, z0, x1, y1, z1) in enumerate(boxes):
@@ -208,6 +232,21 @@ class Mission:
             hi = np.array([(x1 + 0.5) * c, (y1 + 0.5) * c, (z1 + 1.5) * lh])
             out[n, :3], out[n, 3:] = (lo + hi) / 2, (hi - lo) / 2
         return out
+
+    def _columns_m(self) -> np.ndarray:
+        """Over terrain, each building cell as its own box, from below the lowest ground of
+        its cell (the terrain, a heightfield, covers the rest) to its top above the ground at
+        its centre: boxes merged across cells would float over a slope or sink into it."""
+        c, lh = self.physics.cell_size_m, self.physics.level_height_m
+        g = self.ground_m
+        assert g is not None and self.scenario is not None and self.scenario.grids is not None
+        occ = self.scenario.grids.occluding
+        rows = []
+        for x, y in zip(*np.nonzero(occ.any(axis=2)), strict=True):
+            top = g[x, y] + (int(np.flatnonzero(occ[x, y])[-1]) + 1.5) * lh
+            low = float(g[max(x - 1, 0) : x + 2, max(y - 1, 0) : y + 2].min()) - lh
+            rows.append([x * c, y * c, (top + low) / 2, c / 2, c / 2, (top - low) / 2])
+        return np.array(rows).reshape(-1, 6)
 
     def camera(self) -> tuple[int, int, int]:
         """The gimbal's setting now: (tilt degrees, pan degrees, zoom tenths)."""
@@ -356,12 +395,15 @@ class Mission:
             t_eff, p_eff, z = float(tilt), float(pan), float(level)
         else:
             t_eff, p_eff = view_angles(tilt, pan, pose.rpy, self.physics.stabilized_gimbal)
-            # Height above the ground in horizontal cell sizes, minus one (the grid's levels).
-            z = float(pose.position[2]) / self.physics.cell_size_m - 1.0
+            # Height above the ground under it in horizontal cell sizes, minus one (the grid's
+            # levels).
+            above = float(pose.position[2]) - self.ground_at(float(x), float(y))
+            z = above / self.physics.cell_size_m - 1.0
         at = CameraPose(float(x), float(y), z, t_eff, p_eff, int(zoom10))
         n = footprint_cells_pose(
-            self.world.lens, at, self._geo_obstacles, self.world.occluding[0], self._buf
-        )
+            self.world.lens, at, self._geo_obstacles, self.world.occluding[0], self._ground,
+            self._buf,
+        )  # fmt: skip
         return self._buf[:n]
 
     def sample(self, pose: Pose) -> int:

@@ -136,6 +136,8 @@ class PyFlytFlight:
         self.dt = float(av.step_period)
 
         self.sphere_ids = []
+        if first.ground_m is not None:  # a site's terrain: a heightfield over the flat plane
+            self.sphere_ids.append(self._terrain(pybullet, first.ground_m, p.cell_size_m))
         for cx, cy, cz, r in first.obstacle_spheres_m():
             shape = av.createCollisionShape(pybullet.GEOM_SPHERE, radius=float(r))
             body = av.createMultiBody(
@@ -166,6 +168,23 @@ class PyFlytFlight:
         for i in range(len(self.drones)):
             self._hold(i)
             self._set_target(starts[i], i)
+
+    def _terrain(self, pybullet: Any, ground: np.ndarray, cell_m: float) -> int:
+        """The terrain as PyBullet's heightfield shape: a post at every cell centre, (i, j) at
+        (i, j) x ``cell_m``, triangles between them (a straight move between two neighbouring
+        centres runs along an edge, on the ground's linear profile). PyBullet centres the
+        field on its base: half its extent and its middle height."""
+        sx, sy = ground.shape
+        shape = self.aviary.createCollisionShape(
+            pybullet.GEOM_HEIGHTFIELD, meshScale=[cell_m, cell_m, 1.0],
+            heightfieldData=ground.T.ravel().tolist(), numHeightfieldRows=sx,
+            numHeightfieldColumns=sy,
+        )  # fmt: skip
+        middle = (float(ground.max()) + float(ground.min())) / 2
+        return self.aviary.createMultiBody(
+            baseMass=0.0, baseCollisionShapeIndex=shape,
+            basePosition=[(sx - 1) / 2 * cell_m, (sy - 1) / 2 * cell_m, middle],
+        )  # fmt: skip
 
     def _hold(self, i: int = 0) -> None:
         """Position mode, holding where drone ``i`` is, trimmed for hover.

@@ -211,24 +211,28 @@ def _occluded_ground(cx, cy, cz, gx, gy, ground):
     the voxels' convention); the camera is ``cz + 1`` levels above the ground under it, the
     target on its own ground. Between cell centres the terrain is bilinear, so a uniform
     slope never hides its own cells; the segment is sampled every half cell."""
-    sx, sy = ground.shape
-    top = ground[cx, cy] + cz + 1.0  # heights from the ground plane at level -1
+    top = ground_at(ground, cx, cy) + cz + 1.0  # heights from the ground plane at level -1
     bottom = ground[gx, gy]
     dx, dy = gx - cx, gy - cy
     n = int(math.ceil(2.0 * math.sqrt(dx * dx + dy * dy)))
     for s in range(1, n):
         t = s / n
-        px, py = cx + t * dx, cy + t * dy
-        i0 = min(max(int(math.floor(px)), 0), sx - 1)
-        j0 = min(max(int(math.floor(py)), 0), sy - 1)
-        i1, j1 = min(i0 + 1, sx - 1), min(j0 + 1, sy - 1)
-        fx, fy = min(max(px - i0, 0.0), 1.0), min(max(py - j0, 0.0), 1.0)
-        g = (ground[i0, j0] * (1 - fx) + ground[i1, j0] * fx) * (1 - fy) + (
-            ground[i0, j1] * (1 - fx) + ground[i1, j1] * fx
-        ) * fy
-        if top + t * (bottom - top) < g - 1e-9:
+        if top + t * (bottom - top) < ground_at(ground, cx + t * dx, cy + t * dy) - 1e-9:
             return True
     return False
+
+
+@numba.njit(cache=True)
+def ground_at(ground, px, py):
+    """The terrain at point (px, py), bilinear between cell centres (exact at a centre)."""
+    sx, sy = ground.shape
+    i0 = min(max(int(math.floor(px)), 0), sx - 1)
+    j0 = min(max(int(math.floor(py)), 0), sy - 1)
+    i1, j1 = min(i0 + 1, sx - 1), min(j0 + 1, sy - 1)
+    fx, fy = min(max(px - i0, 0.0), 1.0), min(max(py - j0, 0.0), 1.0)
+    return (ground[i0, j0] * (1 - fx) + ground[i1, j0] * fx) * (1 - fy) + (
+        ground[i0, j1] * (1 - fx) + ground[i1, j1] * fx
+    ) * fy
 
 
 @numba.njit(cache=True)
@@ -277,11 +281,12 @@ def frustum_over_ground(lens, pose, occluding, ground, out):
     fx, fy, fz = math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)
     rx, ry = math.sin(p), -math.cos(p)
     ux, uy, uz = math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)
-    cz = pose.z + ground[pose.x, pose.y]
-    reach = int(math.floor(lens.max_range))
+    cz = pose.z + ground_at(ground, pose.x, pose.y)
+    reach = int(math.floor(lens.max_range)) + 1
+    x0, y0 = int(math.floor(pose.x + 0.5)), int(math.floor(pose.y + 0.5))  # the nearest cell
     n = 0
-    for i in range(max(0, pose.x - reach), min(lens.size_x, pose.x + reach + 1)):
-        for j in range(max(0, pose.y - reach), min(lens.size_y, pose.y + reach + 1)):
+    for i in range(max(0, x0 - reach), min(lens.size_x, x0 + reach + 1)):
+        for j in range(max(0, y0 - reach), min(lens.size_y, y0 + reach + 1)):
             dx, dy = float(i - pose.x), float(j - pose.y)
             if dx * dx + dy * dy > lens.max_range * lens.max_range:
                 continue
