@@ -110,6 +110,7 @@ def test_a_dtm_in_another_crs_is_reprojected(tmp_path: Path) -> None:
     with rasterio.open(folder / "dtm.tif", "w", **profile) as dst:
         dst.write(data, 1)
     site = load_site(folder)
+    assert "terrain dtm.tif (bilinear, reprojected from EPSG:32632)" in site.ground
     original = load_site(HILLS)
     inner = np.s_[2:-2, 2:-2]
     assert np.abs(site.terrain - original.terrain)[inner].max() < 0.6

@@ -122,11 +122,13 @@ def frame_of(folder: Path, s: SiteSettings) -> GridFrame:
         return GridFrame(src.crs.to_wkt(), t.c, north - ny * cell, float(cell), (nx, ny))
 
 
-def warp_onto(folder: Path, s: SiteSettings, key: str, frame: GridFrame) -> np.ndarray:
+def warp_onto(folder: Path, s: SiteSettings, key: str, frame: GridFrame) -> tuple[np.ndarray, str]:
     """Raster ``site.key`` reprojected onto ``frame`` (X, Y), metres above sea level: bilinear
-    for the terrain, the highest pixel for the surface. No-data, NaN, a cell outside the
-    raster or a vertical unit other than metres is refused in one line."""
+    for the terrain, the highest pixel for the surface; and what was done, in words. No-data,
+    NaN, a cell outside the raster or a vertical unit other than metres is refused in one
+    line."""
     from affine import Affine
+    from rasterio.crs import CRS
     from rasterio.warp import Resampling, reproject
 
     path = folder / getattr(s, key)
@@ -141,6 +143,7 @@ def warp_onto(folder: Path, s: SiteSettings, key: str, frame: GridFrame) -> np.n
                 "metres above sea level first"
             )
         band = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+        crs = src.crs
         nx, ny = frame.shape
         dst = np.full((ny, nx), np.nan)
         reproject(
@@ -156,7 +159,10 @@ def warp_onto(folder: Path, s: SiteSettings, key: str, frame: GridFrame) -> np.n
             f"site.{key}: {int(bad.sum()):,} of the grid's {nx * ny:,} cells are no-data, NaN "
             f"or outside {path.name}; fill them or make the grid smaller"
         )
-    return np.ascontiguousarray(dst[::-1, :].T)
+    how = "bilinear" if key == "terrain" else "highest pixel"
+    if crs != CRS.from_user_input(frame.crs):
+        how += f", reprojected from {crs.to_string()}"
+    return np.ascontiguousarray(dst[::-1, :].T), how
 
 
 def estimate_terrain(surface: np.ndarray, cell: float, window_m: float) -> np.ndarray:
@@ -175,18 +181,18 @@ def read_ground(folder: Path, s: SiteSettings, frame: GridFrame) -> Ground:
     nx, ny = frame.shape
     if not (s.terrain or s.surface):
         return Ground(np.zeros((nx, ny)), None, "flat ground (no terrain or surface model)")
-    terrain = warp_onto(folder, s, "terrain", frame) if s.terrain else None
+    terrain, t_how = warp_onto(folder, s, "terrain", frame) if s.terrain else (None, "")
     if not s.surface:
-        return Ground(terrain, None, f"terrain {s.terrain} (bilinear onto the grid)")
-    surface = warp_onto(folder, s, "surface", frame)
+        return Ground(terrain, None, f"terrain {s.terrain} ({t_how})")
+    surface, s_how = warp_onto(folder, s, "surface", frame)
     if terrain is None:
         terrain = estimate_terrain(surface, frame.cell, s.ground_window_m)
         how = (
-            f"terrain estimated from the surface {s.surface} by a grey-scale opening over "
-            f"{s.ground_window_m:g} m (no DTM given)"
+            f"terrain estimated from the surface {s.surface} ({s_how}) by a grey-scale "
+            f"opening over {s.ground_window_m:g} m (no DTM given)"
         )
     else:
-        how = f"terrain {s.terrain} (bilinear), surface {s.surface} (highest pixel)"
+        how = f"terrain {s.terrain} ({t_how}), surface {s.surface} ({s_how})"
     obstacles = surface - terrain
     obstacles[obstacles < s.min_obstacle_m] = 0.0
     rule = f"obstacles = surface - terrain >= {s.min_obstacle_m:g} m"
