@@ -15,7 +15,7 @@ import pytest
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import common as mav
 
-from cli_checks import one_error_line
+from cli_checks import one_error_line, upload_with_mavsdk
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPUS = ROOT / "examples" / "sites" / "campus"
@@ -167,27 +167,10 @@ def test_altitude_limits_and_an_existing_folder_refuse(tmp_path: Path) -> None:
     one_error_line(proc, "already exists")
 
 
-def free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_mavsdk_imports_the_plan_and_an_autopilot_receives_every_item(tmp_path: Path) -> None:
     out = tmp_path / "m"
     plan(out, "--size", "15", "15", "3", "--seed", "3")
-    data = json.loads((out / "mission.plan").read_text())["mission"]["items"]
-    helper = Path(__file__).parent / "mavsdk_upload.py"
-    proc = subprocess.run(
-        [sys.executable, str(helper), str(out / "mission.plan"), str(free_udp_port())],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    line = next((x for x in proc.stdout.splitlines() if x.startswith("RECEIVED ")), None)
-    assert line is not None, proc.stdout + proc.stderr
-    got = json.loads(line.removeprefix("RECEIVED "))
-    assert got["imported"] == len(data) == len(got["items"])
+    data, got = upload_with_mavsdk(out / "mission.plan")
     for item, recv in zip(data, got["items"], strict=True):
         assert (recv["command"], recv["frame"]) == (item["command"], item["frame"])
         p = item["params"]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import rasterio
 
-from cli_checks import one_error_line
+from cli_checks import one_error_line, upload_with_mavsdk
 from pirl.config.errors import ConfigError
 from pirl.config.world import VCPPConfig
 from pirl.missions.site_check import check_site
@@ -307,21 +307,7 @@ def test_the_planner_mission_follows_the_terrain_with_clearance(hills_plan: Path
 
 
 def test_mavsdk_uploads_the_terrain_mission(hills_plan: Path) -> None:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    items = json.loads((hills_plan / "mission.plan").read_text())["mission"]["items"]
-    helper = Path(__file__).parent / "mavsdk_upload.py"
-    proc = subprocess.run(
-        [sys.executable, str(helper), str(hills_plan / "mission.plan"), str(port)],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    line = next((x for x in proc.stdout.splitlines() if x.startswith("RECEIVED ")), None)
-    assert line is not None, proc.stdout + proc.stderr
-    got = json.loads(line.removeprefix("RECEIVED "))
-    assert got["imported"] == len(items) == len(got["items"])
+    items, got = upload_with_mavsdk(hills_plan / "mission.plan")
     for item, recv in zip(items, got["items"], strict=True):
         assert (recv["command"], recv["frame"]) == (item["command"], item["frame"])
         if item["params"][6] is not None and item["frame"] == 0:  # MAV_FRAME_GLOBAL

@@ -38,6 +38,18 @@ def _write_tif(
         dst.units = ("m",)
 
 
+def _write_polygons(out: Path, to_ll, cells: dict[str, tuple[float, ...]], west: float,
+                    south: float, cell: float) -> None:  # fmt: skip
+    """Each named polygon, given as cells (x0, y0, x1, y1) from the south-west corner, as a
+    GeoJSON file in longitude/latitude."""
+    for name, (x0, y0, x1, y1) in cells.items():
+        feat = _feature(to_ll, west + x0 * cell, south + y0 * cell, west + x1 * cell,
+                        south + y1 * cell)  # fmt: skip
+        (out / f"{name}.geojson").write_text(
+            json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
+        )
+
+
 def _feature(to_ll, e0: float, n0: float, e1: float, n1: float) -> dict:
     ring = [(e0, n0), (e1, n0), (e1, n1), (e0, n1), (e0, n0)]
     coords = [list(to_ll.transform(e, n)) for e, n in ring]
@@ -69,14 +81,8 @@ def campus() -> None:
     to_ll = Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True)
 
     south = north - rows * cell
-    area = _feature(to_ll, west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
-    no_fly = _feature(
-        to_ll, west + 36 * cell, south + 30 * cell, west + 47 * cell, south + 39 * cell
-    )
-    for name, feat in (("area", area), ("no_fly", no_fly)):
-        (out / f"{name}.geojson").write_text(
-            json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
-        )
+    polygons = {"area": (1, 1, 47, 39), "no_fly": (36, 30, 47, 39)}
+    _write_polygons(out, to_ll, polygons, west, south, cell)
     (out / "site.yaml").write_text(
         "# An invented campus on a GeoTIFF DSM (UTM 32N): docs/sites.md\n"
         "name: campus\n"
@@ -116,12 +122,8 @@ def hills() -> None:
     _write_tif(out / "dsm.tif", dsm, crs, west, north, cell)
     to_ll = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
     south = north - rows * cell
-    area = _feature(to_ll, west + 1 * cell, south + 1 * cell, west + 47 * cell, south + 39 * cell)
-    no_fly = _feature(to_ll, west + 40 * cell, south + 1 * cell, west + 47 * cell, south + 8 * cell)
-    for name, feat in (("area", area), ("no_fly", no_fly)):
-        (out / f"{name}.geojson").write_text(
-            json.dumps({"type": "FeatureCollection", "features": [feat]}, indent=1) + "\n"
-        )
+    polygons = {"area": (1, 1, 47, 39), "no_fly": (40, 1, 47, 8)}
+    _write_polygons(out, to_ll, polygons, west, south, cell)
     (out / "site.yaml").write_text(
         "# An invented hillside: DTM and DSM, metres above sea level (UTM 33N): docs/sites.md\n"
         "name: hills\n"
