@@ -40,7 +40,6 @@ Rules (docs/physics.md):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,7 +53,14 @@ from pirl.env.info import InfoSnapshot
 from pirl.env.observation import build_observations, obs_layout, obs_size_for
 from pirl.physics.coverage import footprint_cells_pose, view_angles
 from pirl.world import dynamics as D
-from pirl.world.footprint import NO_GROUND, PAPER, CameraPose, buffer_rows, footprint_model
+from pirl.world.footprint import (
+    NO_GROUND,
+    PAPER,
+    CameraPose,
+    buffer_rows,
+    footprint_model,
+    ground_at,
+)
 from pirl.world.metrics import episode_metrics
 from pirl.world.scenario import Scenario, draw_scenario
 from pirl.world.state import WorldBatch
@@ -163,19 +169,11 @@ class Mission:
 
     # -- geometry -------------------------------------------------------------------------
     def ground_at(self, x: float, y: float) -> float:
-        """The ground's height in metres at grid point (x, y) (bilinear between cell centres;
-        0 on flat ground)."""
-        g = self.ground_m
-        if g is None:
+        """The ground's height in metres at grid point (x, y) (the footprint's bilinear rule,
+        :func:`pirl.world.footprint.ground_at`; 0 on flat ground)."""
+        if self.ground_m is None:
             return 0.0
-        sx, sy = g.shape
-        i0, j0 = min(max(int(math.floor(x)), 0), sx - 1), min(max(int(math.floor(y)), 0), sy - 1)
-        i1, j1 = min(i0 + 1, sx - 1), min(j0 + 1, sy - 1)
-        fx, fy = min(max(x - i0, 0.0), 1.0), min(max(y - j0, 0.0), 1.0)
-        return float(
-            (g[i0, j0] * (1 - fx) + g[i1, j0] * fx) * (1 - fy)
-            + (g[i0, j1] * (1 - fx) + g[i1, j1] * fx) * fy
-        )
+        return float(ground_at(self.ground_m, float(x), float(y)))
 
     def cell_position(self, cell: Cell | np.ndarray) -> np.ndarray:
         """Centre of ``cell`` in metres: (i, j) * cell size, (k + 1) * level height above the
