@@ -386,13 +386,17 @@ def test_fleet_evaluation_k1_plays_as_one_uav_and_larger_fleets_cover_sooner(
     ] == [1]
 
 
-def test_fleet_evaluation_refuses_what_cannot_fly_in_a_fleet(tmp_path):
+def test_fleet_evaluation_refuses_what_cannot_fly_in_a_fleet(tmp_path, monkeypatch):
+    from pirl.agents.methods import METHODS
+
     plan = EvalPlan([spec_for_builtin("boustrophedon")], [(10, 10, 3)], 1, uavs=[1, 2])
     with pytest.raises(ConfigError, match="grid only"):
         evaluate(replace(plan, sims=["grid", "physics"]), tmp_path / "a")
     with pytest.raises(ConfigError, match="uavs"):
         evaluate(replace(plan, uavs=[0, 2]), tmp_path / "b")
     llm = spec_for_builtin("llm-only", "oracle")
+    # A method registered as flying alone (every built-in one flies in a fleet).
+    monkeypatch.setitem(METHODS, "llm-only", replace(METHODS["llm-only"], fleet=False))
     with pytest.raises(ConfigError, match="flies one UAV"):
         evaluate(replace(plan, specs=[llm]), tmp_path / "c")
     assert not (tmp_path / "a").exists() and not (tmp_path / "c").exists()

@@ -233,20 +233,21 @@ def test_a_ppo_method_trains_on_mixed_fleet_sizes_and_flies_any_of_them(tmp_path
     assert sorted({r["uavs"] for r in rows}) == [1, 3] and all(r["collisions"] == 0 for r in rows)
 
 
-def test_pirl_refuses_fleet_training_in_one_line():
-    from pirl.agents.train import build_env_stack
+def test_imitation_refuses_fleet_training_in_one_line():
+    from pirl.agents.settings import check_fleet_training
     from pirl.config.run import RunConfig
 
     cfg = RunConfig().with_overrides(train={"uavs": [1, 2]})
-    with pytest.raises(ConfigError, match=r"train.uavs=\[1, 2\]: PIRL's advice"):
-        build_env_stack(cfg, 0, advice=object())
+    with pytest.raises(ConfigError, match=r"train.uavs=\[1, 2\]: imitation learns"):
+        check_fleet_training(cfg, imitation=True)
+    check_fleet_training(cfg, imitation=False)
     with pytest.raises(ConfigError, match="train.uavs"):
         RunConfig().with_overrides(train={"uavs": [0]})
 
 
-def test_pirl_train_takes_uavs_and_refuses_them_for_pirl_without_a_folder(tmp_path):
-    """``pirl train --uavs 1,2`` sets train.uavs of a PPO method's run; PIRL is refused in one
-    line before any folder is made."""
+def test_pirl_train_takes_uavs_and_refuses_them_for_imitation_without_a_folder(tmp_path):
+    """``pirl train --uavs 1,2`` sets train.uavs of a PPO method's run; imitation is refused
+    in one line before any folder is made."""
     import subprocess
     import sys
 
@@ -254,9 +255,9 @@ def test_pirl_train_takes_uavs_and_refuses_them_for_pirl_without_a_folder(tmp_pa
         cmd = [sys.executable, "-m", "pirl", "train", "--config", "test", *args]
         return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
 
-    proc = pirl("--method", "pirl", "--uavs", "2", "--out", str(tmp_path / "p"))
+    proc = pirl("--method", "il", "--uavs", "2", "--out", str(tmp_path / "p"))
     assert proc.returncode != 0 and "Traceback" not in proc.stderr
-    assert "train.uavs=[2]: PIRL's advice" in " ".join(proc.stderr.split())
+    assert "train.uavs=[2]: imitation learns" in " ".join(proc.stderr.split())
     assert not (tmp_path / "p").exists()
     run = tmp_path / "e"
     proc = pirl("--method", "ppo-ewri", "--uavs", "1,2", "--steps", "1024", "--out", str(run))

@@ -165,7 +165,7 @@ def train(
     uavs: Annotated[
         list[int] | None,
         uavs_option(
-            "Fleet sizes to train with (train.uavs; PPO methods): one policy shared by every "
+            "Fleet sizes to train with (train.uavs; PPO methods and PIRL): one policy shared by every "
             "UAV of worlds of each size (docs/fleets.md)."
         ),
     ] = None,

@@ -23,13 +23,18 @@ import numpy as np
 from pirl.advice.base import Advisor, Answer, error_answer
 from pirl.advice.recommendation import Recommendation
 from pirl.config import grid
-from pirl.world.planning import WorldView, largest_footprint_camera, nearest, useful_map
+from pirl.world.planning import WorldView, claims, largest_footprint_camera, nearest, useful_map
 
 ORACLE_LABEL = "oracle (not an LLM)"
 
 
 def oracle_recommendation(view: WorldView) -> Recommendation:
-    """The oracle's advice for one world state."""
+    """The oracle's advice for one world state.
+
+    In a fleet (the view has teammates) it never sends two UAVs to the same ground: each
+    useful place belongs to the UAV nearest to it by moves (:func:`claims`), and a UAV is led
+    to the nearest useful place of its own; only when it has none left, to the nearest of any.
+    Its path goes round the cells teammates hold."""
     camera, altitude = largest_footprint_camera(view)
     x, y, z = view.position
     useful = useful_map(view, camera, altitude)
@@ -37,7 +42,15 @@ def oracle_recommendation(view: WorldView) -> Recommendation:
     if z != altitude:
         dz = 1 if altitude > z else -1
     else:
-        path = nearest(view, view.position, lambda c: c[2] == altitude and useful[c[0], c[1]])
+        path = None
+        if view.teammates.size:
+            mine = claims(view) == view.rank
+            path = nearest(
+                view, view.position,
+                lambda c: c[2] == altitude and useful[c[0], c[1]] and mine[c],
+            )  # fmt: skip
+        if path is None:
+            path = nearest(view, view.position, lambda c: c[2] == altitude and useful[c[0], c[1]])
         if path and len(path) >= 2:
             dx, dy, dz = (b - a for a, b in zip(path[0], path[1], strict=True))
     tilt, pan, zoom10 = camera

@@ -32,6 +32,7 @@ from pirl.config.grid import PAN_RANGE, TILT_RANGE, ZOOM_RANGE, paper_half_width
 from pirl.config.run import TEMPLATE_VARIANT
 
 __all__ = [
+    "FLEET_LINE",
     "FOOTPRINTS",
     "PROMPT_VERSION",
     "PromptState",
@@ -134,6 +135,9 @@ class PromptState:
         buildings: a site's map (no spheres): the blocked columns near the UAV as
             ``x,y:n`` (blocked from the ground up through n levels), nearest first; shown in
             place of the obstacle list. Empty in generated worlds, whose text is unchanged.
+        teammates: a fleet's other UAVs still flying, ``(x, y, z, battery)`` each, in slot
+            order: the fleet prompt adds a line naming them (:data:`FLEET_LINE`). Empty for
+            one UAV, whose prompt is unchanged.
     """
 
     position: tuple[int, int, int]
@@ -151,6 +155,7 @@ class PromptState:
     local_map: str = ""
     coarse_map: str = ""
     buildings: str = ""
+    teammates: tuple[tuple[int, int, int, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.footprint not in FOOTPRINTS:
@@ -162,6 +167,9 @@ class PromptState:
         for obstacle in self.obstacles:
             if len(obstacle) != 4:
                 raise ValueError(f"an obstacle is (cx, cy, cz, r), got {obstacle!r}")
+        for mate in self.teammates:
+            if len(mate) != 4:
+                raise ValueError(f"a teammate is (x, y, z, battery), got {mate!r}")
         numbers = (self.zoom, self.battery, self.coverage, self.fov_deg, self.max_range)
         if not all(math.isfinite(float(v)) for v in numbers):
             raise ValueError("zoom, battery, coverage, fov_deg and max_range must be finite")
@@ -196,6 +204,34 @@ def _obstacles(state: PromptState, compact: bool) -> str:
         else:
             items.append(f"[{_num(cx, 1)}, {_num(cy, 1)}, {_num(cz, 1)}] radius {_num(r, 1)}")
     return " ".join(items) if compact else "; ".join(items)
+
+
+FLEET_LINE = (
+    "Other drones of the fleet [x, y, z] and battery (they see ground too: go where they "
+    "are not going)"
+)
+"""The fleet prompt's header: the line a fleet's prompt adds after the state, naming the UAVs
+flying beside this one (the single UAV's prompt has no such line)."""
+
+
+def _teammates(state: PromptState, compact: bool, decimals: int) -> str:
+    """The fleet line's items: each teammate's cell and battery."""
+    items = []
+    for x, y, z, battery in state.teammates:
+        b = _num(min(max(float(battery), 0.0), 1.0), decimals)
+        if compact:
+            items.append(f"[{int(x)},{int(y)},{int(z)},{b}]")
+        else:
+            items.append(f"[{int(x)}, {int(y)}, {int(z)}] battery {b}")
+    return " ".join(items) if compact else "; ".join(items)
+
+
+def _fleet_line(state: PromptState, compact: bool, decimals: int) -> str:
+    """The fleet prompt's last line (a newline first), or nothing for one UAV."""
+    if not state.teammates:
+        return ""
+    header = "Teammates [x,y,z,battery]" if compact else FLEET_LINE
+    return f"\n{header}: {_teammates(state, compact, decimals)}"
 
 
 def _view_rule(state: PromptState, compact: bool) -> str:
@@ -280,6 +316,8 @@ def prompt_context(state: PromptState, decimals: int = 2) -> dict[str, Any]:
         "ranges": _ranges(), "format_example": FORMAT_EXAMPLE,
         "format_ranges": COMPACT_TEMPLATE, "state_marker": STATE_MARKER,
         "local_map": state.local_map, "coarse_map": state.coarse_map,
+        "teammates": _teammates(state, False, decimals),
+        "teammates_compact": _teammates(state, True, decimals),
     }  # fmt: skip
 
 
@@ -330,6 +368,7 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
             f"View now: {_view_now(state, compact=True)}\n"
             f"{'Buildings' if state.buildings else 'Obstacles [x,y,z,radius]'}: "
             f"{_obstacles(state, compact=True)}"
+            f"{_fleet_line(state, True, decimals)}"
         )
     return (
         "[Task]\n"
@@ -350,4 +389,5 @@ def build_prompt(state: PromptState, variant: str = "paper", decimals: int = 2) 
         f"Coverage: {coverage} (share of ground cells seen)\n"
         f"View cone now: {_view_now(state, compact=False)}\n"
         f"{'Buildings' if state.buildings else SPHERES_HEADER}: {_obstacles(state, compact=False)}"
+        f"{_fleet_line(state, False, decimals)}"
     )

@@ -49,6 +49,7 @@ def view_prompt_state(view: WorldView, maps: bool = False) -> PromptState:
         local_map=local,
         coarse_map=coarse,
         buildings=buildings_near(view) if cfg.site else "",
+        teammates=tuple((int(x), int(y), int(z), float(b)) for x, y, z, b in view.teammates),
     )
 
 

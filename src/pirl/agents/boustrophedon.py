@@ -131,7 +131,7 @@ class BoustrophedonPolicy(Policy):
 
     def _view(self) -> WorldView:
         """The world as this UAV plans on it: a fleet's UAV sees only its own part's ground
-        while some of it is left, and its teammates' cells as blocked."""
+        while some of it is left (the view's paths go round its teammates' cells)."""
         view = WorldView.of(self.world, self.e)
         if self.world.uavs == 1:
             return view
@@ -140,13 +140,7 @@ class BoustrophedonPolicy(Policy):
                 view = dataclasses.replace(view, coverable=view.coverable & self.own)
             else:  # its part is done: help with what is left anywhere
                 self.own, self.target, self.sweeping = None, None, False
-        blocked = view.blocked.copy()
-        k = self.world.uavs
-        first = (self.e // k) * k
-        for t in range(first, first + k):
-            if t != self.e and not self.world.left[t]:
-                blocked[self.world.position(t)] = True
-        return dataclasses.replace(view, blocked=blocked)
+        return view
 
     def _affordable(self, view: WorldView, path: list[Cell]) -> bool:
         legs = max(0, len(path) - 1)

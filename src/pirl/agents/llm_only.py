@@ -10,6 +10,7 @@ that many times per episode; after that the UAV holds still (a budget for slow L
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
 
 import numpy as np
@@ -75,9 +76,19 @@ class LLMOnlyPolicy(Policy):
         self.episode_calls = 0
         self.label = f"LLM-only ({advisor.label})"
         self.queue: list[int] = []
-        self.calls = 0
-        self.failed = 0
-        self.empty = 0
+        self.counts = Counter()  # shared by a fleet's teammates (:meth:`teammate`)
+
+    def teammate(self) -> LLMOnlyPolicy:
+        """Another UAV's LLM-only in a fleet: the same advisor and budget per episode (its own
+        ``max_calls``), counted with this one's calls."""
+        mate = LLMOnlyPolicy(self.advisor, self.prompt_variant, self.max_calls)
+        mate.counts = self.counts
+        return mate
+
+    @property
+    def calls(self) -> int:
+        """Advisor calls so far (every teammate's)."""
+        return self.counts["calls"]
 
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         self.world, self.e = world, index
@@ -91,19 +102,19 @@ class LLMOnlyPolicy(Policy):
             prompts, views = advice_requests(
                 self.world, [self.e], self.advisor, self.prompt_variant
             )
-            self.calls += 1
+            self.counts["calls"] += 1
             answer = self.advisor.advise(prompts, views)[0]
             if answer.recommendation is None:
-                self.failed += 1
+                self.counts["failed"] += 1
             else:
                 view = WorldView.of(self.world, self.e)
                 self.queue = action_queue(view.camera, answer.recommendation)
                 if not self.queue:
-                    self.empty += 1
+                    self.counts["empty"] += 1
         if self.queue:
             return self.queue.pop(0)
         return hold_action(WorldView.of(self.world, self.e).camera)
 
     def stats(self) -> dict[str, int]:
         """Advisor calls, failed or unparseable answers, and answers that asked for nothing."""
-        return {"calls": self.calls, "failed": self.failed, "empty": self.empty}
+        return {key: self.counts[key] for key in ("calls", "failed", "empty")}

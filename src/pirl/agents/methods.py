@@ -70,8 +70,8 @@ class Method:
     """``pirl reproduce`` records a GIF of it (a random walk's animation shows nothing)."""
     fleet: bool = True
     """It can fly in a fleet (``--uavs``): a learned policy shared by every UAV, the planner
-    over the area split, one random walk per UAV. LLM-only asks one prompt per UAV that does
-    not know its teammates, so it flies alone."""
+    over the area split, one random walk or LLM-only (its prompt naming the teammates) per
+    UAV. A method registered with False is refused ``--uavs`` in one line."""
     options: tuple[str, ...] = ()
     """The ``pirl train`` options of this method beyond those every method takes (``--out``,
     ``--config``, ``--steps``, ``--seed``, ``--resume``); any other is refused."""
@@ -128,7 +128,6 @@ METHODS: dict[str, Method] = {
             training=PLAYED,
             asks=True,
             policy="pirl.agents.llm_only:LLMOnlyPolicy",
-            fleet=False,
         ),
         Method(
             "il",

@@ -107,7 +107,7 @@ def train_run(
                    "pare": {"advisor": advisor} if advisor is not None else {}},
         site=site,
     )  # fmt: skip
-    check_fleet_training(cfg, entry.advised)
+    check_fleet_training(cfg, entry.training == TRAIN_IMITATION)
     if entry.advised:
         advisor_kind(cfg.pare.advisor).check_key(cfg)
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)

@@ -84,13 +84,14 @@ def resolve_settings(
     return cfg
 
 
-def check_fleet_training(cfg: RunConfig, advised: bool) -> None:
-    """Refuse fleets in training (``train.uavs`` other than [1]) for an advised method: PIRL's
-    advice is asked about one UAV."""
-    if advised and tuple(cfg.train.uavs) != (1,):
+def check_fleet_training(cfg: RunConfig, imitation: bool) -> None:
+    """Refuse fleets in training (``train.uavs`` other than [1]) for a method that learns by
+    imitation: it learns from its expert's single-UAV episodes, not in an environment."""
+    if imitation and tuple(cfg.train.uavs) != (1,):
         raise ConfigError(
-            f"train.uavs={list(cfg.train.uavs)}: PIRL's advice is asked about one UAV; "
-            "train it with train.uavs [1] and fly it in a fleet with pirl evaluate --uavs"
+            f"train.uavs={list(cfg.train.uavs)}: imitation learns from its expert's one-UAV "
+            "episodes; train it with train.uavs [1] and fly it in a fleet with pirl evaluate "
+            "--uavs"
         )
 
 

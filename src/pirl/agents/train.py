@@ -44,13 +44,13 @@ from pirl.agents.run_folder import (
     train_seed_base,
 )
 from pirl.agents.schedules import learning_rate_of
-from pirl.agents.settings import check_fleet_training
 from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.config.world import REWARD_TERMS, VCPPConfig
-from pirl.env.sb3_vec import VCPPVecEnv, make_vec_env
+from pirl.env.sb3_vec import make_vec_env
+from pirl.env.shaping import ShapingHooks
 from pirl.pare.stats import AdvisorFailing
 from pirl.progress import Progress
 
@@ -154,7 +154,8 @@ class EnvStack:
     """The wrapped training environment and handles on its layers."""
 
     env: VecMonitor
-    venv: VCPPVecEnv
+    venv: ShapingHooks
+    """The batched env itself: a :class:`VCPPVecEnv`, or a fleet's (``train.uavs``)."""
     pare: Any | None
 
 
@@ -164,12 +165,11 @@ def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str =
     if cfg.train.uavs != (1,):
         from pirl.env.fleet import MixedFleetVecEnv
 
-        check_fleet_training(cfg, advised=advice is not None)
         venv = MixedFleetVecEnv(
             cfg.ppo.n_envs, training_env(cfg), cfg.train.uavs, seed=train_seed_base(seed)
         )
-        return EnvStack(VecMonitor(venv), venv, None)
-    venv = make_vec_env(cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env(cfg))
+    else:
+        venv = make_vec_env(cfg.ppo.n_envs, seed=train_seed_base(seed), config=training_env(cfg))
     pare = None
     inner = venv
     if advice is not None:

@@ -101,8 +101,9 @@ class TrainSettings(Settings, section="train"):
     what validation chose for ``quick`` (docs/results.md, "The stall guard")."""
     uavs: tuple[int, ...] = (1,)
     """Fleet sizes trained on together (docs/fleets.md): ``[1]`` one UAV per world; ``[1, 2,
-    4]`` worlds of 1, 2 and 4 UAVs side by side, one policy shared by every UAV. A PPO
-    method's own; PIRL's advice is asked about one UAV, so it trains on ``[1]``."""
+    4]`` worlds of 1, 2 and 4 UAVs side by side, one policy shared by every UAV (PIRL's advice
+    is asked about each UAV, its teammates named). PPO methods and PIRL; imitation learns on
+    ``[1]``."""
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method

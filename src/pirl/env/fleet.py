@@ -13,7 +13,8 @@ the single env (``pirl/VCPP-v0``) bit for bit.
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+import functools
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from pirl.env.render import render_world
 from pirl.env.sb3_vec import SharedVecEnvPlumbing
 from pirl.env.shaping import ShapingHooks
 from pirl.world import dynamics as D
+from pirl.world.planning import WorldView
 from pirl.world.scenario import Scenario
 from pirl.world.state import WorldBatch
 
@@ -290,11 +292,14 @@ def make_fleet_vec_env(
     return venv
 
 
-class MixedFleetVecEnv(SharedVecEnvPlumbing, VecEnv):
+class MixedFleetVecEnv(SharedVecEnvPlumbing, ShapingHooks, VecEnv):
     """Fleets of several sizes side by side as one ``VecEnv``: a :class:`FleetVecEnv` per
     fleet size K, their slots one after the other (``sizes[0]``'s first), so one masked
     policy learns from fleets of every size at once. Each K gets about the same number of
-    UAV slots: ``max(1, round(worlds / (len(sizes) * K)))`` worlds of K UAVs."""
+    UAV slots: ``max(1, round(worlds / (len(sizes) * K)))`` worlds of K UAVs.
+
+    Its shaping hooks (:class:`~pirl.env.shaping.ShapingHooks`) are the parts' joined, so
+    PARE shapes every UAV's reward with advice about that UAV."""
 
     def __init__(
         self, worlds: int, config: VCPPConfig, sizes: Sequence[int], seed: int | None = 0
@@ -308,6 +313,7 @@ class MixedFleetVecEnv(SharedVecEnvPlumbing, VecEnv):
             for i, k in enumerate(sizes)
         ]
         self.sizes = list(sizes)
+        self.cfg = config
         self._edges = np.cumsum([0] + [p.num_envs for p in self.parts])
         first = self.parts[0]
         self.render_mode = "rgb_array"
@@ -352,6 +358,39 @@ class MixedFleetVecEnv(SharedVecEnvPlumbing, VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [image for p in self.parts for image in p.get_images()]
+
+    # -- the shaping hooks, joined over the parts ---------------------------------------------
+    def poses(self) -> np.ndarray:
+        return np.concatenate([p.poses() for p in self.parts])
+
+    def step_poses(self) -> np.ndarray:
+        return np.concatenate([p.step_poses() for p in self.parts])
+
+    def parked(self) -> np.ndarray:
+        return np.concatenate([p.parked() for p in self.parts])
+
+    def step_weights(self, term: str) -> np.ndarray:
+        return np.concatenate([p.step_weights(term) for p in self.parts])
+
+    def set_step_term(self, term: str, values: np.ndarray) -> None:
+        for part, chunk in zip(self.parts, self._split(np.asarray(values)), strict=True):
+            part.set_step_term(term, chunk)
+
+    def add_step_info(self, key: str, build: Callable[[int], Any]) -> None:
+        for part, start in zip(self.parts, self._edges[:-1], strict=False):
+            part.add_step_info(key, functools.partial(_shifted, build, int(start)))
+
+    def world_views(self, worlds: Sequence[int], copy: bool = False) -> list[WorldView]:
+        views = []
+        for e in worlds:
+            i = int(np.searchsorted(self._edges, int(e), side="right")) - 1
+            views += self.parts[i].world_views([int(e) - int(self._edges[i])], copy)
+        return views
+
+
+def _shifted(build: Callable[[int], Any], start: int, e: int) -> Any:
+    """``build`` of the joined slot a part's slot ``e`` is."""
+    return build(start + e)
 
 
 class _Terms:

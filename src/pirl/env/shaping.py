@@ -37,6 +37,11 @@ class ShapingHooks:
         """As :meth:`poses`, at the end of the last step (before any auto-reset)."""
         return _poses(self._last_step().status)
 
+    def parked(self) -> np.ndarray:
+        """(num_envs,) bool: the slots whose UAV has left its fleet's episode and waits, parked,
+        for its world to start again (:mod:`pirl.env.fleet`); never one for a single UAV."""
+        return self.core.world.left.copy()
+
     def step_weights(self, term: str) -> np.ndarray:
         """(num_envs,) float64: the weight of reward term ``term`` in each world's last step
         (an episode that ended on it keeps its own weight)."""

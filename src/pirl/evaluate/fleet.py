@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from pirl.agents.boustrophedon import BoustrophedonPolicy, fleet_planners
+from pirl.agents.llm_only import LLMOnlyPolicy
 from pirl.agents.loading import LearnedPolicy, act_rng
 from pirl.agents.methods import METHODS
 from pirl.agents.policy import Policy, RandomPolicy
@@ -124,17 +125,15 @@ def fleet_records(
     ``base`` (method, label, sim, act, world), the seed, ``ids`` (train seed, source) and
     the fleet's row."""
     team = team_for(policy)
-    return [
-        {
-            **base,
-            "uavs": cfg.uavs,
-            "seed": seed,
-            **ids,
-            **run_fleet_episode(cfg, seed, team).row,
-            "llm_calls": 0,
-        }  # fmt: skip
-        for seed in seeds
-    ]
+    records = []
+    for seed in seeds:
+        calls = getattr(policy, "calls", 0)
+        row = run_fleet_episode(cfg, seed, team).row
+        records.append({
+            **base, "uavs": cfg.uavs, "seed": seed, **ids, **row,
+            "llm_calls": getattr(policy, "calls", 0) - calls,
+        })  # fmt: skip
+    return records
 
 
 def uav_seed(seed: int, u: int) -> int:
@@ -147,13 +146,16 @@ def uav_seed(seed: int, u: int) -> int:
 
 def team_for(policy: Policy) -> Team:
     """The fleet version of a method's policy: the planner flies the area split, a learned
-    policy is shared, a random policy is one per UAV; anything else cannot fly in a fleet."""
+    policy is shared, a random policy and LLM-only are one per UAV; anything else cannot fly
+    in a fleet."""
     if isinstance(policy, BoustrophedonPolicy):
         return PolicyTeam(fleet_planners)
     if isinstance(policy, LearnedPolicy):
         return SharedTeam(policy)
     if isinstance(policy, RandomPolicy):
         return PolicyTeam(lambda world, g: [RandomPolicy() for _ in range(world.uavs)])
+    if isinstance(policy, LLMOnlyPolicy):  # each UAV asks about itself, teammates named
+        return PolicyTeam(lambda world, g: [policy.teammate() for _ in range(world.uavs)])
     raise ConfigError(f"{policy.label} flies one UAV; a fleet (--uavs above 1) cannot use it")
 
 

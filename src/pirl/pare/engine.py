@@ -53,6 +53,8 @@ class PARE:
         self.weights = weights
         self._consts = weights.constants(env.cfg.size)
         self._p_t = np.zeros((board.n, 3), dtype=np.float64)
+        # A fleet's slots whose UAV had left before the step (parked: no transition to shape).
+        self._parked = np.zeros(board.n, dtype=np.bool_)
         # Cumulative steps per status, then the staleness sum.
         self._counts = np.zeros(6, dtype=np.int64)
 
@@ -108,8 +110,9 @@ class PARE:
         self.source.request(self.env, obs, None)
 
     def before_step(self) -> None:
-        """Before the worlds step: where they are."""
+        """Before the worlds step: where they are, and which of a fleet's UAVs are parked."""
         self._p_t[:] = self.env.poses()[:, :3]
+        self._parked[:] = self.env.parked()
 
     def after_step(
         self,
@@ -127,16 +130,23 @@ class PARE:
         marks the worlds whose state is a real one now (not an ended episode's last) and
         ``restarted`` the worlds this step reset: their step is no transition, so it is
         neither shaped nor counted. Both None: every world is live (auto-reset at once).
+
+        A fleet's UAV that had left before the step (parked, :meth:`ShapingHooks.parked`) took
+        no step: its slot is neither shaped nor counted, and it is not asked about until its
+        world starts again, so the counts, the teacher's samples and its price are UAV steps.
         """
         env, board, st = self.env, self.board, self.stats
         self.source.collect()
         shaped = shape(self._p_t, env.step_poses(), board.rec, board.meta, board.t, self._consts)
+        skip = self._parked if restarted is None else self._parked | restarted
+        if self._parked.any():
+            shaped.table[self._parked] = 0.0
         f_llm = shaped.table[:, 0]
         env.set_step_term("llm", f_llm)
         add_llm_term(rewards, f_llm, env.step_weights("llm"))
         status, staleness = shaped.status, shaped.staleness
-        if restarted is not None:
-            status, staleness = status[~restarted], staleness[~restarted]
+        if skip.any():
+            status, staleness = status[~skip], staleness[~skip]
         self._counts[:5] += np.bincount(status, minlength=5)
         self._counts[5] += int(staleness.sum())
         st.steps += len(status)
@@ -148,6 +158,9 @@ class PARE:
         if ended.size:
             self.source.end(ended)
         self.source.tick()
+        parked = env.parked()
+        if parked.any():
+            live = ~parked if live is None else live & ~parked
         self.source.request(env, obs, live)
         return shaped
 

@@ -1,4 +1,5 @@
-"""PARE as a Stable-Baselines3 ``VecEnvWrapper`` around :class:`~pirl.env.sb3_vec.VCPPVecEnv`.
+"""PARE as a Stable-Baselines3 ``VecEnvWrapper`` around :class:`~pirl.env.sb3_vec.VCPPVecEnv`
+or a fleet's VecEnv (:mod:`pirl.env.fleet`).
 
 Per step, ``info["pare"]`` holds ``f_llm``, ``dir_align``, ``pos_align``, ``move``, ``cam``,
 ``status`` (fresh, cached, stale, student or missing) and ``staleness`` (steps); the LLM term
@@ -12,23 +13,24 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvWrapper
 
-from pirl.env.sb3_vec import VCPPVecEnv
+from pirl.env.shaping import ShapingHooks
 from pirl.pare.core import STATUSES, Shaped
 from pirl.pare.engine import PARE
 from pirl.pare.stats import PareStats
 
 
 class PAREVecEnv(VecEnvWrapper):
-    """Adds the PARE reward term to a VCPPVecEnv (which resets an ended world at once)."""
+    """Adds the PARE reward term to a batched env with shaping hooks (which resets an ended
+    world at once)."""
 
-    def __init__(self, venv: VCPPVecEnv, pare: PARE) -> None:
+    def __init__(self, venv: ShapingHooks, pare: PARE) -> None:
         super().__init__(venv)
         self.pare = pare
 
     @classmethod
     def from_settings(
         cls,
-        venv: VCPPVecEnv,
+        venv: ShapingHooks,
         settings: Any,
         advice: Any,
         refit_every: int = 256,

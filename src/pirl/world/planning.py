@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -49,6 +49,11 @@ class WorldView:
     position: Cell
     camera: Camera
     energy: float
+    teammates: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    """(k, 4) rows (x, y, z, battery share) of the UAVs flying beside this one (a fleet's),
+    in slot order; none for one UAV."""
+    rank: int = 0
+    """How many of :attr:`teammates` come before this UAV in slot order."""
 
     @classmethod
     def of(cls, world: WorldBatch, e: int, copy: bool = False) -> WorldView:
@@ -67,6 +72,8 @@ class WorldView:
             position=world.position(e),
             camera=world.camera_setting(e),
             energy=float(world.energy[e]),
+            teammates=world.teammates(e),
+            rank=world.rank(e),
         )
 
     def footprint(self, pose: Cell, camera: Camera) -> np.ndarray:
@@ -91,9 +98,17 @@ class WorldView:
         return bool((self.coverable[i, j] & (self.views[i, j] == 0)).any())
 
     def free(self, cell: Cell) -> bool:
+        """Inside the grid, not blocked, and no teammate there (a move into it is masked)."""
         sx, sy, sz = self.cfg.size
         x, y, z = cell
-        return 0 <= x < sx and 0 <= y < sy and 0 <= z < sz and not self.blocked[x, y, z]
+        if not (0 <= x < sx and 0 <= y < sy and 0 <= z < sz) or self.blocked[x, y, z]:
+            return False
+        return not self.teammates.size or cell not in self.teammate_cells
+
+    @functools.cached_property
+    def teammate_cells(self) -> frozenset[Cell]:
+        """The cells the teammates hold."""
+        return frozenset((int(r[0]), int(r[1]), int(r[2])) for r in self.teammates)
 
     def neighbours(self, cell: Cell) -> Iterator[Cell]:
         """Free cells one move away, in action order."""
@@ -142,6 +157,42 @@ def nearest(view: WorldView, start: Cell, accept: Callable[[Cell], bool]) -> lis
                 parent[n] = cell
                 queue.append(n)
     return None
+
+
+def claims(view: WorldView) -> np.ndarray:
+    """(X, Y, Z) int32: for each free cell, the UAV nearest to it by moves (its index in slot
+    order among the view's UAV and its teammates; -1 where none reaches). Ties go to the
+    earlier UAV in slot order, so every UAV of a fleet draws the same borders."""
+    me = np.array([view.position], dtype=np.int64)
+    team = view.teammates[:, :3].astype(np.int64)
+    sources = np.concatenate([team[: view.rank], me, team[view.rank :]])
+    return _claim(view.blocked, sources, D.MOVES)
+
+
+@numba.njit(cache=True)
+def _claim(blocked, sources, moves):
+    """Breadth-first search from every source at once, in source order, by ``moves``."""
+    sx, sy, sz = blocked.shape
+    owner = np.full((sx, sy, sz), -1, dtype=np.int32)
+    queue = np.empty((sx * sy * sz, 3), dtype=np.int64)
+    head = tail = 0
+    for i in range(sources.shape[0]):
+        x, y, z = sources[i, 0], sources[i, 1], sources[i, 2]
+        if owner[x, y, z] < 0:
+            owner[x, y, z] = i
+            queue[tail] = sources[i]
+            tail += 1
+    while head < tail:
+        x, y, z = queue[head, 0], queue[head, 1], queue[head, 2]
+        head += 1
+        for d in range(moves.shape[0]):
+            i, j, k = x + moves[d, 0], y + moves[d, 1], z + moves[d, 2]
+            inside = 0 <= i < sx and 0 <= j < sy and 0 <= k < sz
+            if inside and not blocked[i, j, k] and owner[i, j, k] < 0:
+                owner[i, j, k] = owner[x, y, z]
+                queue[tail, 0], queue[tail, 1], queue[tail, 2] = i, j, k
+                tail += 1
+    return owner
 
 
 def largest_footprint_camera(view: WorldView) -> tuple[Camera, int]:

@@ -468,6 +468,23 @@ class WorldBatch:
         """Battery of world ``e`` normalized to [0, 1]."""
         return max(0.0, float(self.energy[e]) / self.capacity)
 
+    def teammates(self, e: int) -> np.ndarray:
+        """(k, 4) float64 rows (x, y, z, battery in [0, 1]) of the UAVs flying beside slot
+        ``e`` in its world (those that have not left), in slot order; (0, 4) for one UAV."""
+        k = self.uavs
+        first = self.world_of(e) * k
+        rows = [s for s in range(first, first + k) if s != e and not self.left[s]]
+        out = np.zeros((len(rows), 4), dtype=np.float64)
+        for i, s in enumerate(rows):
+            out[i, :3] = self.position(s)
+            out[i, 3] = self.battery(s)
+        return out
+
+    def rank(self, e: int) -> int:
+        """How many of :meth:`teammates` of slot ``e`` come before it in slot order."""
+        first = self.world_of(e) * self.uavs
+        return int(np.count_nonzero(~self.left[first:e]))
+
     def obstacle_list(self, e: int) -> np.ndarray:
         """Obstacle spheres (n, 4) of world ``e``: rows (cx, cy, cz, radius)."""
         return self.obstacles[self.world_of(e), : int(self.status[e]["n_obstacles"])].copy()
