@@ -165,8 +165,8 @@ def train(
     uavs: Annotated[
         list[int] | None,
         uavs_option(
-            "Fleet sizes to train with (train.uavs; PPO methods and PIRL): one policy shared by every "
-            "UAV of worlds of each size (docs/fleets.md)."
+            "Fleet sizes to train with (train.uavs; PPO methods and PIRL): one policy shared "
+            "by every UAV of worlds of each size (docs/fleets.md)."
         ),
     ] = None,
 ) -> None:
