@@ -138,6 +138,10 @@ def _states(n: int) -> list[PromptState]:
                 obstacles=tuple(
                     tuple(float(v) for v in rng.random(4) * 10) for _ in range(rng.integers(0, 4))
                 ),
+                teammates=tuple(  # a fleet's in every other state
+                    (*(int(rng.integers(0, s)) for s in size), float(rng.random()))
+                    for _ in range(int(rng.integers(0, 4)) * (len(out) % 2))
+                ),
             )
         )  # fmt: skip
     return out
