@@ -15,17 +15,15 @@ Usage: ``python benchmarks/fleet_oracle.py --size 30x30x3 --site examples/sites/
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import time
 
 import numpy as np
 
+from fleet_planner import fleet_args  # the same command line (benchmarks/ is on the path)
 from pirl.advice.oracle import OracleAdvisor
 from pirl.agents.llm_only import LLMOnlyPolicy
-from pirl.config.world import VCPPConfig
 from pirl.evaluate.fleet import fleet_records, speed_ups
-from pirl.world.seeable import with_site
 
 
 class BlindOracle(OracleAdvisor):
@@ -38,16 +36,7 @@ class BlindOracle(OracleAdvisor):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", action="append", default=[], help="XxYxZ, repeatable")
-    parser.add_argument("--site", action="append", default=[], help="site folder, repeatable")
-    parser.add_argument("--seeds", default="1000,1001,1002")
-    parser.add_argument("--uavs", default="2,4")
-    args = parser.parse_args()
-    seeds = [int(s) for s in args.seeds.split(",")]
-    ks = sorted({1, *(int(k) for k in args.uavs.split(","))})
-    worlds = {s: VCPPConfig(size=tuple(int(v) for v in s.split("x"))) for s in args.size}
-    worlds |= {site.rstrip("/").split("/")[-1]: with_site(VCPPConfig(), site) for site in args.site}
+    worlds, seeds, ks = fleet_args(__doc__, "2,4")
     for name, cfg in worlds.items():
         began = time.perf_counter()
         for oracle in (OracleAdvisor(), BlindOracle()):

@@ -22,17 +22,24 @@ from pirl.evaluate.fleet import run_fleet_episode, speed_ups
 from pirl.world.seeable import with_site
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def fleet_args(doc: str, uavs: str) -> tuple[dict[str, VCPPConfig], list[int], list[int]]:
+    """The fleet benchmarks' command line: the worlds by name, the scenario seeds and the
+    fleet sizes (K = 1 always among them, for the speed-ups)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--size", action="append", default=[], help="XxYxZ, repeatable")
     parser.add_argument("--site", action="append", default=[], help="site folder, repeatable")
     parser.add_argument("--seeds", default="1000,1001,1002")
-    parser.add_argument("--uavs", default="1,2,4,8")
+    parser.add_argument("--uavs", default=uavs)
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     ks = sorted({1, *(int(k) for k in args.uavs.split(","))})
     worlds = {s: VCPPConfig(size=tuple(int(v) for v in s.split("x"))) for s in args.size}
     worlds |= {site.rstrip("/").split("/")[-1]: with_site(VCPPConfig(), site) for site in args.site}
+    return worlds, seeds, ks
+
+
+def main() -> None:
+    worlds, seeds, ks = fleet_args(__doc__, "1,2,4,8")
     for name, cfg in worlds.items():
         began = time.perf_counter()
         rows = {k: [run_fleet_episode(cfg.replace(uavs=k), s).row for s in seeds] for k in ks}
