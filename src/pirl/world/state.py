@@ -68,6 +68,10 @@ STATE_ARRAYS = (
 lookups and scratch space derived from the config."""
 
 
+_NO_TEAMMATES = np.zeros((0, 4), dtype=np.float64)
+_NO_TEAMMATES.flags.writeable = False  # shared by every single-UAV view
+
+
 def copy_records(records: np.ndarray) -> np.ndarray:
     """A read-only copy of a 1-D record array, made as bytes: numpy copies records field by
     field, ten times slower, and every step's info snapshot copies them."""
@@ -472,6 +476,8 @@ class WorldBatch:
         """(k, 4) float64 rows (x, y, z, battery in [0, 1]) of the UAVs flying beside slot
         ``e`` in its world (those that have not left), in slot order; (0, 4) for one UAV."""
         k = self.uavs
+        if k == 1:  # every single-UAV view asks, at every planner step: nothing to gather
+            return _NO_TEAMMATES
         first = self.world_of(e) * k
         rows = [s for s in range(first, first + k) if s != e and not self.left[s]]
         out = np.zeros((len(rows), 4), dtype=np.float64)
@@ -482,6 +488,8 @@ class WorldBatch:
 
     def rank(self, e: int) -> int:
         """How many of :meth:`teammates` of slot ``e`` come before it in slot order."""
+        if self.uavs == 1:
+            return 0
         first = self.world_of(e) * self.uavs
         return int(np.count_nonzero(~self.left[first:e]))
 
