@@ -377,7 +377,7 @@ class MixedFleetVecEnv(SharedVecEnvPlumbing, ShapingHooks, VecEnv):
             part.set_step_term(term, chunk)
 
     def add_step_info(self, key: str, build: Callable[[int], Any]) -> None:
-        for part, start in zip(self.parts, self._edges[:-1], strict=False):
+        for part, start in zip(self.parts, self._edges[:-1], strict=True):
             part.add_step_info(key, functools.partial(_shifted, build, int(start)))
 
     def world_views(self, worlds: Sequence[int], copy: bool = False) -> list[WorldView]:
