@@ -143,6 +143,7 @@ def test_pirl_trains_on_fleets_of_one_and_two(tmp_path):
     assert proc.returncode == 0, proc.stderr
     meta = json.loads((run / "meta.json").read_text())
     assert meta["complete"] and "uavs:\n  - 1\n  - 2" in (run / "config.yaml").read_text()
+    assert meta["label"].endswith(" [fleets of 1, 2 UAVs]")  # its rows say how it trained
     stats = json.loads((run / "advisor_stats.json").read_text())
     assert stats["steps"] > 0 and stats["advisor"] == "oracle (not an LLM)"
 

@@ -60,6 +60,17 @@ EPISODE_COLUMNS = (
 )  # fmt: skip
 
 
+def fleet_note(cfg: RunConfig) -> str:
+    """What a run's label adds when it trained on fleets or sees teammates, so its rows never
+    pass as a single UAV's training: ``" [fleets of 1, 2, 4 UAVs; sees 2 teammates]"``."""
+    parts = []
+    if cfg.train.uavs != (1,):
+        parts.append(f"fleets of {', '.join(map(str, cfg.train.uavs))} UAVs")
+    if cfg.env.obs_teammates:
+        parts.append(f"sees {cfg.env.obs_teammates} teammates")
+    return f" [{'; '.join(parts)}]" if parts else ""
+
+
 def ppo_method(name: str) -> Method:
     """The entry of a PPO method; one line naming the PPO methods for any other name."""
     entry = METHODS.get(name)
@@ -407,7 +418,7 @@ def train(
         take_head_start(cfg, advice, str(run.path.resolve()), log)
     meta = {
         "method": method,
-        "label": advice.label if advice is not None else entry.label,
+        "label": (advice.label if advice is not None else entry.label) + fleet_note(cfg),
         "seed": seed,
         "git_commit": git_commit(),
         "advisor": getattr(advisor, "label", None),
