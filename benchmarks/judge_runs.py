@@ -6,7 +6,8 @@ for example one setting against another) on larger worlds than they trained on a
 sites, next to the boustrophedon planner, each run under the env it trained with (its stall
 guard included) from the paper's camera pose. Rows: VCR IQM over seeds [stratified bootstrap
 95% interval], the worst seed, steps relative to the planner, the share of steps the stall
-guard chose.
+guard chose, and steps to 0.99 of coverable cells over the planner's (the mean over
+the episodes that got there; how many did, of all, in brackets).
 
 Usage (docs/experiments/ notes give the commands behind their tables)::
 
@@ -53,21 +54,39 @@ def main() -> None:
         for world, cfg, grid in worlds_of(env, sizes, [], args.sites):
             seeds = validation_seeds(grid, args.episodes)
             p_steps, _ = planner_steps(cfg, seeds)
+            p_99 = planner_steps_to_99(cfg, seeds)
             for act in ("stochastic", "greedy"):
-                vcr, ratio, guard = [], [], []
+                vcr, ratio, guard, to_99 = [], [], [], []
                 for run in runs:
                     metrics = run_batch(cfg, load_policy(run, act=act), seeds)
                     vcr.append(np.mean([m["vcr"] for m in metrics]))
                     steps = [m["steps"] / p for m, p in zip(metrics, p_steps, strict=True)]
                     ratio.append(np.mean(steps))
                     guard.append(np.mean([m["guarded_steps"] / m["steps"] for m in metrics]))
+                    to_99 += [
+                        m["steps_to_99"] / p
+                        for m, p in zip(metrics, p_99, strict=True)
+                        if m["steps_to_99"] is not None and p
+                    ]
                 est = interval_estimates(np.array(vcr)[:, None])
+                n = len(runs) * len(seeds)
+                pace = f"x{np.mean(to_99):.2f}" if to_99 else "-"
                 print(
                     f"{name:>12} {world:>14} {act:>10}  VCR IQM {est['iqm']:.3f} "
                     f"[{est['iqm_lo']:.3f}, {est['iqm_hi']:.3f}]  worst seed {min(vcr):.3f}  "
-                    f"steps x{np.mean(ratio):.2f} planner  guarded {np.mean(guard):.3f}",
+                    f"steps x{np.mean(ratio):.2f} planner  to 0.99 {pace} ({len(to_99)}/{n})  "
+                    f"guarded {np.mean(guard):.3f}  seeds {' '.join(f'{v:.3f}' for v in vcr)}",
                     flush=True,
                 )
+
+
+def planner_steps_to_99(env_cfg, seeds: list[int]) -> list[int | None]:
+    """The boustrophedon planner's steps to 0.99 of coverable cells on each scenario."""
+    from pirl.env.vcpp_env import VCPPEnv
+    from pirl.evaluate.rollout import run_episode
+
+    env = VCPPEnv(env_cfg)
+    return [run_episode(env, load_policy("boustrophedon"), s).metrics["steps_to_99"] for s in seeds]
 
 
 if __name__ == "__main__":
