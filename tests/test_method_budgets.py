@@ -100,3 +100,21 @@ def test_pirl_train_refuses_a_bad_budget_in_one_line_and_makes_no_folder(tmp_pat
     assert "train.steps_by_method: 'ppo-ewrii' is not trained" in proc.stderr
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "run").exists()
+
+
+def test_a_method_with_its_own_fleet_sizes_trains_on_them_and_imitation_is_refused(tmp_path):
+    """``train.uavs_by_method``: the named method's run trains on fleets (its config.yaml and
+    its label say so), the others keep ``train.uavs``; naming imitation is refused in one line."""
+    from pirl.agents.settings import method_config
+
+    cfg = RunConfig.from_yaml(TEST).with_overrides(train={"uavs_by_method": {"ppo-ewri": [1, 2]}})
+    assert method_config(cfg, "ppo-ewri").train.uavs == (1, 2)
+    assert method_config(cfg, "ppo-sr").train.uavs == (1,)
+    train_one("ppo-ewri", "", 0, cfg, tmp_path / "ewri", False, False)
+    own = yaml.safe_load((tmp_path / "ewri" / "config.yaml").read_text())
+    assert own["train"]["uavs"] == [1, 2]
+    meta = json.loads((tmp_path / "ewri" / "meta.json").read_text())
+    assert meta["label"] == "PPO-EWRI [fleets of 1, 2 UAVs]"
+    bad = cfg.with_overrides(train={"uavs_by_method": {"il": [1, 2]}})
+    with pytest.raises(ConfigError, match=r"^train.uavs_by_method: il is not trained in PPO"):
+        plan_runs(bad, "oracle")

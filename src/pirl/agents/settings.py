@@ -20,14 +20,15 @@ from pirl.config.run import RunConfig
 
 
 def check_budgets(cfg: RunConfig) -> None:
-    """Refuse in one line a ``train.steps_by_method`` name that is not a method trained in PPO
-    steps (called before any folder is made)."""
-    for name in cfg.train.steps_by_method:
-        if trained_method(name, "train.steps_by_method").training != TRAIN_PPO:
-            raise ConfigError(
-                f"train.steps_by_method: {name} is not trained in PPO steps "
-                f"(its budget is in the il section)"
-            )
+    """Refuse in one line a ``train.steps_by_method`` or ``train.uavs_by_method`` name that is
+    not a method trained in PPO steps (called before any folder is made)."""
+    for key, why in (
+        ("steps_by_method", "its budget is in the il section"),
+        ("uavs_by_method", "it learns from its expert's one-UAV episodes"),
+    ):
+        for name in getattr(cfg.train, key):
+            if trained_method(name, f"train.{key}").training != TRAIN_PPO:
+                raise ConfigError(f"train.{key}: {name} is not trained in PPO steps ({why})")
 
 
 def method_steps(cfg: RunConfig, method: str) -> int:
@@ -38,11 +39,15 @@ def method_steps(cfg: RunConfig, method: str) -> int:
 
 
 def method_config(cfg: RunConfig, method: str) -> RunConfig:
-    """``cfg`` as ``method`` trains it: total_steps set to :func:`method_steps`."""
+    """``cfg`` as ``method`` trains it: total_steps set to :func:`method_steps`, uavs to its
+    ``train.uavs_by_method`` entry."""
     steps = method_steps(cfg, method)
-    return (
-        cfg if steps == cfg.train.total_steps else cfg.with_overrides(train={"total_steps": steps})
-    )
+    uavs = tuple(cfg.train.uavs_by_method.get(method, cfg.train.uavs))
+    own = {
+        **({"total_steps": steps} if steps != cfg.train.total_steps else {}),
+        **({"uavs": list(uavs)} if uavs != tuple(cfg.train.uavs) else {}),
+    }
+    return cfg.with_overrides(train=own) if own else cfg
 
 
 def resolve_settings(
@@ -59,7 +64,8 @@ def resolve_settings(
 
     1. the preset or file ``config``; without one, the run folder ``run``'s own config.yaml
        (a resumed run continues as it began), else ``default``, else the defaults;
-    2. ``method``'s own budget and env (``train.steps_by_method``, what it trains on);
+    2. ``method``'s own budget, fleet sizes and env (``train.steps_by_method``,
+       ``train.uavs_by_method``, what it trains on);
     3. ``overrides``, section by section (command-line options: ``{"train": {...}}``);
     4. ``site``: the site folder's map, size and ground cells in place of generated worlds.
     """

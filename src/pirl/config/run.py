@@ -107,7 +107,12 @@ class TrainSettings(Settings, section="train"):
     steps_by_method: dict[str, int] = field(default_factory=dict)
     """Environment steps of particular methods, by name (``{ppo-ewri: 1638400}``), in place of
     total_steps: each method's own budget, as RL Zoo keeps one per algorithm. The method
-    registry checks the names when a run is planned (pirl.agents.runs.check_budgets)."""
+    registry checks the names when a run is planned (pirl.agents.settings.check_budgets)."""
+    uavs_by_method: dict[str, tuple[int, ...]] = field(default_factory=dict)
+    """Fleet sizes of particular methods, by name (``{pirl: [1, 2, 4]}``), in place of
+    ``uavs``: a fleet curriculum for the methods trained in an environment while imitation
+    learns on ``[1]`` (docs/fleets.md, "A fleet curriculum"). Checked like
+    ``steps_by_method``."""
 
     def validate(self) -> None:
         """A positive length and checkpoint interval, a known camera start."""
@@ -126,6 +131,11 @@ class TrainSettings(Settings, section="train"):
                 raise self.refuse("steps_by_method", f"{name}: must be > 0")
         if not self.uavs or any(not isinstance(k, int) or k < 1 for k in self.uavs):
             raise self.refuse("uavs", "write fleet sizes >= 1, e.g. [1, 2, 4]")
+        for name, sizes in self.uavs_by_method.items():
+            if not sizes or any(k < 1 for k in sizes):
+                raise self.refuse(
+                    "uavs_by_method", f"{name}: write fleet sizes >= 1, e.g. [1, 2, 4]"
+                )
 
 
 @dataclass(frozen=True)
