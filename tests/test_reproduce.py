@@ -45,11 +45,13 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
     assert label in table and "not an LLM" in label
     assert "LLM-only (oracle, not an LLM)" in table
     assert "(0.64)" not in table  # sizes without a paper column carry no paper numbers
-    # reproduce.uavs: the planner and PPO-EWRI flown as fleets of 1 and 2 on the campus.
+    # reproduce.uavs: the planner, PPO-EWRI and PIRL (every variant: fleet_methods names the
+    # method) flown as fleets of 1 and 2 on the campus.
     fleets = table.split("### Fleets")[1].split("###")[0]
     flown = {(line.split("|")[3].strip(), line.split("|")[4].strip())
              for line in fleets.splitlines() if line.startswith("| site:campus")}  # fmt: skip
-    assert {k for _, k in flown} == {"1", "2"} and len(flown) == 4
+    assert {k for _, k in flown} == {"1", "2"} and len(flown) == 6
+    assert label in fleets
     assert (report.parent / "fleet_coverage.png").stat().st_size > 10_000
     for name in ("figure.png", "learning_curves.png"):
         assert (report.parent / name).stat().st_size > 10_000

@@ -367,7 +367,8 @@ class ReproduceSettings(Settings, section="reproduce"):
     also flown at on each of ``sites`` (``pirl evaluate --uavs``; K = 1 among them for the
     speed-ups), into the report's Fleets table and figure. Empty: no fleets."""
     fleet_methods: tuple[str, ...] = ("ppo-ewri",)
-    """Trained methods flown in fleets (the planner always is)."""
+    """Trained methods flown in fleets (the planner always is); a method's every run flies,
+    each of its variants (``pirl``: pirl-local and pirl-oracle)."""
     workers: int = 2
     """Evaluation worker processes."""
     gif_every: int = 2

@@ -309,7 +309,8 @@ class Plan:
         rp, ev = self.cfg.reproduce, self.evaluation
         if not rp.uavs:
             return None
-        runs = [f for f in self.folders if f.name.rsplit("-s", 1)[0] in rp.fleet_methods]
+        # By the planned method, so `pirl` flies every PIRL variant (pirl-local, pirl-oracle).
+        runs = [self.out / "runs" / r.name for r in self.runs if r.method in rp.fleet_methods]
         return EvalPlan(
             specs=[*map(spec_for_run, runs), spec_for_builtin(PLANNER.name)],
             sizes=[],
