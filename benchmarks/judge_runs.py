@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from agent_sweep import planner_steps, worlds_of  # noqa: E402
+from agent_sweep import worlds_of  # noqa: E402
 from pirl.agents.loading import load_policy  # noqa: E402
 from pirl.config.run import RunConfig  # noqa: E402
 from pirl.evaluate.rollout import run_batch  # noqa: E402
@@ -53,8 +53,9 @@ def main() -> None:
         env = env.replace(start_camera="fixed")
         for world, cfg, grid in worlds_of(env, sizes, [], args.sites):
             seeds = validation_seeds(grid, args.episodes)
-            p_steps, _ = planner_steps(cfg, seeds)
-            p_99 = planner_steps_to_99(cfg, seeds)
+            planned = planner_metrics(cfg, seeds)  # one planner episode per scenario
+            p_steps = [m["steps"] for m in planned]
+            p_99 = [m["steps_to_99"] for m in planned]
             for act in ("stochastic", "greedy"):
                 vcr, ratio, guard, to_99 = [], [], [], []
                 for run in runs:
@@ -80,13 +81,14 @@ def main() -> None:
                 )
 
 
-def planner_steps_to_99(env_cfg, seeds: list[int]) -> list[int | None]:
-    """The boustrophedon planner's steps to 0.99 of coverable cells on each scenario."""
+def planner_metrics(env_cfg, seeds: list[int]) -> list[dict]:
+    """The boustrophedon planner's episode metrics on each scenario (its steps, its steps to
+    0.99 of coverable cells)."""
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_episode
 
     env = VCPPEnv(env_cfg)
-    return [run_episode(env, load_policy("boustrophedon"), s).metrics["steps_to_99"] for s in seeds]
+    return [run_episode(env, load_policy("boustrophedon"), s).metrics for s in seeds]
 
 
 if __name__ == "__main__":
