@@ -34,15 +34,17 @@ def _config(tmp: Path, advisor: str) -> Path:
     data = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").to_dict()
     # The gate opens at the first refit with enough held-out answers, so the student shapes
     # most of the run and its answers reach the weights: the LLM from its head start, the
-    # oracle after about three rollouts of its own answers.
+    # oracle after about three rollouts of its own answers. The embedded LLM's answers are
+    # most of this test's time, so its runs are shorter, and five held-out answers (not 20)
+    # let a head start of 40 open the gate.
     data["pare"].update(
         advisor=advisor, mode="student", prompt_variant=quick.pare.prompt_variant,
         teacher_rate=0.02, oracle_teacher_rate=0.25, student_gate_on="agreement",
-        student_gate=0.0, student_closed_rate=1.0, student_fit_steps=20,
+        student_gate=0.0, student_closed_rate=1.0, student_fit_steps=20, student_min_heldout=5,
         student_dataset=str(tmp / "student.sqlite"), cache_path=str(tmp / "advice.sqlite"),
     )  # fmt: skip
-    data["train"]["total_steps"] = 1024
-    data["reproduce"]["teacher_phase_answers"] = 120 if advisor == "local" else 0
+    data["train"]["total_steps"] = 512 if advisor == "local" else 1024
+    data["reproduce"]["teacher_phase_answers"] = 40 if advisor == "local" else 0
     path = tmp / f"{advisor}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

@@ -43,6 +43,7 @@ from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.teacher_dataset import TeacherDataset, default_dataset_path
 from pirl.config import grid, safe_state
+from pirl.config.run import PareSettings
 from pirl.config.world import OBS_BLOCKS
 from pirl.world.state import WorldBatch
 
@@ -61,8 +62,6 @@ N_EXTRA = 6
 """Features after the observation: world size X, Y, Z and absolute position x, y, z (/64)."""
 FEATURE_VERSION = 1
 """Bumped when the features change, so old dataset rows are not mixed with new ones."""
-MIN_HELDOUT = 20
-"""Fewest held-out answers before the student's agreement is trusted (and the gate can open)."""
 CONSTANT_SHARE = 0.9
 """A field is uninformative when one value takes more than this share of the held-out answers:
 matching it says nothing about the state."""
@@ -221,10 +220,11 @@ class Student:
     """The distilled advisor: imitates one teacher (``teacher``, a :func:`teacher_key`).
 
     About one row in five is held out for scoring (chosen by a checksum of its features, so
-    the split does not depend on row ids or on who stored the row); the rest trains.
-    :meth:`fit` runs a fixed number of Adam steps on seeded minibatches, warm-started or, with
-    ``fresh``, from the seed's initial weights, so a run refits the same way every time it
-    meets the same data.
+    the split does not depend on row ids or on who stored the row); the rest trains. Its
+    score is not trusted, so its gate stays shut, below ``min_heldout`` held-out rows
+    (``pare.student_min_heldout``). :meth:`fit` runs a fixed number of Adam steps on seeded
+    minibatches, warm-started or, with ``fresh``, from the seed's initial weights, so a run
+    refits the same way every time it meets the same data.
     """
 
     def __init__(
@@ -236,8 +236,10 @@ class Student:
         lr: float = 1e-3,
         batch_size: int = 256,
         seed: int = 0,
+        min_heldout: int = PareSettings.student_min_heldout,
     ) -> None:
         self.teacher, self.n_features, self.label = teacher, int(n_features), label
+        self.min_heldout = int(min_heldout)
         self.hidden, self.lr, self.batch_size = int(hidden), float(lr), int(batch_size)
         self.seed = int(seed)
         self._initial_weights()
@@ -370,11 +372,11 @@ class Student:
         return self.passes(close if was_open else gate, on)
 
     def passes(self, gate: float, on: str = "agreement") -> bool:
-        """Whether the student may shape rewards: enough held-out answers and, ``on``
+        """Whether the student may shape rewards: ``min_heldout`` held-out answers and, ``on``
         ``"kappa"``, a kappa of at least ``gate`` over informative fields (what the student
         learned of the teacher's signal), or ``on`` ``"agreement"``, a held-out agreement of at
         least ``gate`` (which a noisy teacher cannot reach and a constant one passes)."""
-        if self.score.heldout < MIN_HELDOUT:
+        if self.score.heldout < self.min_heldout:
             return False
         return gate_value(self.score, on) >= gate
 

@@ -16,7 +16,7 @@ from pirl.advice.registry import find_advisor_kind
 from pirl.agents.methods import ADVISED
 from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import UserError
-from pirl.config.run import RunConfig
+from pirl.config.run import PareSettings, RunConfig
 from pirl.pare.bundle import AdviceBundle
 
 RUN_KEY = ":run:"
@@ -110,14 +110,17 @@ def shaped_share(stats: dict[str, Any]) -> float:
     return RunStats.of(stats).shaped_share
 
 
-def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> str | None:
+def unshaped_warning(
+    stats: dict[str, Any],
+    min_shaped: float,
+    gate: float,
+    min_heldout: int = PareSettings.student_min_heldout,
+) -> str | None:
     """One line when a PIRL run was less than ``min_shaped`` shaped, saying why; else None.
 
     The reasons come from the run's counters: teacher answers received, unparseable, failed,
     still in flight at the end, and whether (and when) the student passed its gate.
     """
-    from pirl.advice.student import MIN_HELDOUT
-
     shaped = shaped_share(stats)
     if shaped >= min_shaped:
         return None
@@ -141,7 +144,7 @@ def unshaped_warning(stats: dict[str, Any], min_shaped: float, gate: float) -> s
             why.append(
                 f"student gate never passed (agreement {stats.get('student_agreement', 0):.2f}, "
                 f"{signal}; gate {gate:g} on {int(stats.get('student_heldout', 0))} held-out "
-                f"answers; it needs {MIN_HELDOUT})"
+                f"answers; it needs {min_heldout})"
             )
         else:
             why.append(f"student gate passed at step {passed:,} of {int(stats['steps']):,}")
@@ -191,6 +194,7 @@ def make_student(
             raise
         except (ValueError, OSError, RuntimeError, KeyError) as exc:
             raise UserError(f"--student {file} cannot be loaded: {exc}") from None
+        student.min_heldout = cfg.pare.student_min_heldout  # a setting of this run, not the file's
         if student.teacher != key:
             raise UserError(
                 f"--student {path} imitates {student.teacher}, but this run's teacher is {key} "
@@ -199,7 +203,12 @@ def make_student(
         return student, dataset
     n_features = obs_size_for(env_cfg) + N_EXTRA
     student = Student(
-        key, n_features, label=advisor.label, hidden=cfg.pare.student_hidden, seed=seed
+        key,
+        n_features,
+        label=advisor.label,
+        hidden=cfg.pare.student_hidden,
+        seed=seed,
+        min_heldout=cfg.pare.student_min_heldout,
     )
     return student, dataset
 

@@ -487,7 +487,9 @@ def _finish(
 
         stats = _advisor_stats(stack.pare, advisor)
         run.write_advisor_stats(stats)
-        warning = unshaped_warning(stats, cfg.pare.min_shaped, cfg.pare.gate()[0])
+        warning = unshaped_warning(
+            stats, cfg.pare.min_shaped, cfg.pare.gate()[0], cfg.pare.student_min_heldout
+        )
         if warning:
             _warn(warning)
     run.write_meta({**meta, "complete": True, "timesteps": int(model.num_timesteps)})

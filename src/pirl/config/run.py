@@ -205,6 +205,9 @@ class PareSettings(Settings, section="pare"):
     have grown by this share since its last fit (0 = at every rollout with new answers)."""
     student_hidden: int = 128
     """Student mode: width of the student's two hidden layers."""
+    student_min_heldout: int = 20
+    """Student mode: fewest held-out teacher answers (about one in five is held out) before
+    the student's score is trusted and its gate can open."""
     student_dataset: str = ""
     """Teacher answers with their states; empty = student.sqlite beside the answer cache."""
     student_dataset_scope: str = "run"
@@ -243,7 +246,12 @@ class PareSettings(Settings, section="pare"):
     def validate(self) -> None:
         """Positive intervals and sizes, known mode and prompt, shares in [0, 1]."""
         self.require_positive(
-            "query_every", "timeout_s", "student_fit_steps", "student_hidden", "failure_window"
+            "query_every",
+            "timeout_s",
+            "student_fit_steps",
+            "student_hidden",
+            "student_min_heldout",
+            "failure_window",
         )
         self.require_choice("mode", PareMode)
         if not self.prompt_variant.startswith(TEMPLATE_VARIANT):
