@@ -42,7 +42,7 @@ def test_pirl_runs_start_after_their_teacher_phase_with_its_answers(tmp_path):
             "cache_path": str(tmp_path / "advice.sqlite"),
         },
         reproduce={"methods": ["ppo-sr", "pirl"], "pirl_variants": [{}],
-                   "teacher_phase_answers": 24},
+                   "teacher_phase_answers": 12},
     )  # fmt: skip
     logs: list[str] = []
     runs = train_all(cfg, tmp_path / "out", "local", logs.append, False, workers=2)
@@ -52,4 +52,4 @@ def test_pirl_runs_start_after_their_teacher_phase_with_its_answers(tmp_path):
     assert names.index("teacher-local-compact") < names.index("pirl-local-s0")
     stats = json.loads((runs[-1] / "advisor_stats.json").read_text())
     # No teacher call during the run (rate 0): every answer the student saw came from the phase.
-    assert stats["teacher_calls"] == 0 and stats["student_dataset_size"] >= 24
+    assert stats["teacher_calls"] == 0 and stats["student_dataset_size"] >= 12
