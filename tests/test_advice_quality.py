@@ -254,6 +254,22 @@ def test_the_kappa_gate_lets_a_noisy_teacher_in_and_keeps_a_constant_one_out():
     assert informed.passes(0.02, "kappa_lcb") and not constant_student.passes(0.0, "kappa_lcb")
 
 
+def test_the_gate_waits_for_pare_student_min_heldout_answers():
+    from pirl.agents.pirl_advice import unshaped_warning
+    from pirl.config.errors import ConfigError
+
+    student = _student_of(lambda x, rng: _labels(np.ones(len(x), dtype=int)))
+    held = student.score.heldout
+    assert held >= 20 and student.passes(0.8, "agreement")  # the default minimum, 20
+    student.min_heldout = held + 1  # one more held-out answer than it has
+    assert not student.passes(0.8, "agreement")
+    stats = {"steps": 1000, "steps_unshaped": 1000, "mode": "student", "student_heldout": 7,
+             "student_informative": ["dx"], "gate_passed_at_step": -1}  # fmt: skip
+    assert "on 7 held-out answers; it needs 5)" in unshaped_warning(stats, 0.5, 0.1, 5)
+    with pytest.raises(ConfigError, match="pare.student_min_heldout=0: must be > 0"):
+        RunConfig.from_dict({"pare": {"student_min_heldout": 0}})
+
+
 def test_kappa_error_is_cohens_large_sample_error():
     from pirl.advice.student import cohen_kappa, kappa_error
 
