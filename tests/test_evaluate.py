@@ -106,6 +106,28 @@ def test_longest_tasks_are_handed_out_first():
     assert areas == sorted(areas, reverse=True) and areas[0] == 900
 
 
+def test_a_batched_group_is_one_task_unless_too_few_keep_the_workers_busy():
+    """A trained policy's scenarios of one world and act mode play in one batch (one policy
+    forward per step for all of them); with fewer such groups than twice the workers, each
+    is split so that every worker has work. Built-ins play episode by episode."""
+    from pirl.evaluate.runner import MethodSpec, _tasks
+
+    run = MethodSpec("ppo-ewri", "PPO-EWRI", "runs/ppo-ewri-s0", train_seed=0)
+    builtin = spec_for_builtin("boustrophedon")
+
+    def chunks(plan, workers=2):
+        return sorted((t[0].key, t[4], len(t[3])) for t in _tasks(plan, workers))
+
+    many = EvalPlan([run, builtin], [(10, 10, 3), (20, 20, 3)], 4, acts=["stochastic", "greedy"])
+    assert chunks(many) == sorted(
+        [("ppo-ewri", act, 4) for act in ("stochastic", "greedy") for _ in range(2)]
+        + [("boustrophedon", "fixed", 1)] * 8
+    )
+    few = EvalPlan([run], [(10, 10, 3)], 4, acts=["stochastic"])
+    assert chunks(few) == [("ppo-ewri", "stochastic", 2)] * 2
+    assert chunks(few, workers=1) == [("ppo-ewri", "stochastic", 4)]
+
+
 # -- act modes, batching, seeds as the unit -------------------------------------------------
 @pytest.fixture(scope="module")
 def trained_runs(tmp_path_factory):

@@ -250,12 +250,11 @@ def run_chunk(
 
 # -- driver side ---------------------------------------------------------------------------
 def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
-    tasks = []
+    groups = []
     for spec in plan.specs:
         for act, sim in _act_sims(plan, spec):
             episodes = plan.sim_episodes.get(sim, plan.episodes)
             episodes = min(episodes, plan.episodes_per_method.get(spec.key, episodes))
-            # A batched chunk is best large: one chunk per worker; else two per worker.
             batched = plan.batched and sim == "grid" and act != FIXED
             worlds: list[Any] = list(plan.sim_sizes.get(sim, plan.sizes))
             worlds += plan.sim_sites.get(sim, plan.sites)
@@ -263,10 +262,17 @@ def _tasks(plan: EvalPlan, workers: int) -> list[tuple]:
             for size in worlds:
                 seeds = scenario_seeds(_grid_size(size), episodes)
                 for uavs in fleets:
-                    parts = max(1, workers if batched and uavs is None else 2 * workers)
-                    chunk = max(1, math.ceil(len(seeds) / parts))
-                    for i in range(0, len(seeds), chunk):
-                        tasks.append((spec, size, sim, seeds[i : i + chunk], act, uavs))
+                    groups.append((spec, size, sim, seeds, act, uavs, batched and uavs is None))
+    # A batched group plays all its scenarios with one policy forward per step, so it is
+    # cheapest whole: it is split across the workers only when there are too few groups to
+    # keep them all busy. Episode by episode, two chunks per worker balance the load.
+    whole = sum(g[-1] for g in groups) >= 2 * workers
+    tasks = []
+    for spec, size, sim, seeds, act, uavs, batched in groups:
+        parts = 1 if batched and whole else workers if batched else 2 * workers
+        chunk = max(1, math.ceil(len(seeds) / max(1, parts)))
+        for i in range(0, len(seeds), chunk):
+            tasks.append((spec, size, sim, seeds[i : i + chunk], act, uavs))
     # Longest first, so no long episode starts last while the other workers idle: the
     # physics simulator's (seconds each), then the grid's largest worlds.
     tasks.sort(key=lambda t: (t[2] != Sim.PHYSICS, -_grid_size(t[1])[0] * _grid_size(t[1])[1]))
