@@ -90,6 +90,14 @@ def test_ppo_and_il_runs_load_as_policies(tmp_path):
     il.model.batch_size = 3
     own = il.model.predict_proba(obs)
     assert np.array_equal(il.probabilities(obs)[:, own_columns(il)], own)
+    # PPO's are sb3-contrib's distribution's, exactly, taken without building it.
+    import torch
+
+    assert ppo.masked
+    obs = np.random.default_rng(1).random((5, ppo.obs_size), dtype=np.float32)
+    with torch.no_grad():
+        dist = ppo.model.policy.get_distribution(torch.as_tensor(obs)).distribution
+    assert np.array_equal(ppo.probabilities(obs), dist.probs.numpy())
     for policy in (ppo, il, load_policy("boustrophedon"), load_policy("random", seed=1)):
         metrics = run_episode(env, policy, seed=11).metrics
         assert 0.0 <= metrics["vcr"] <= 1.0
