@@ -116,3 +116,39 @@ def own_columns(policy: TabNetPolicy) -> list[int]:
     """The actions behind the columns of TabNet's own predict_proba."""
     n = len(policy.model.preds_mapper)
     return [int(policy.model.preds_mapper[str(k)]) for k in range(n)]
+
+
+def test_distribution_checks_off_change_no_number():
+    """pirl._torch.configure() turns off torch.distributions' argument checks for speed: a
+    masked action distribution gives the same probabilities, log-probabilities, entropy and
+    samples with the checks on and off, and NaN logits still stop sampling."""
+    import torch
+    from sb3_contrib.common.maskable.distributions import MaskableCategorical
+    from torch.distributions import Distribution
+
+    from pirl._torch import configure
+
+    logits = torch.randn(16, 30, generator=torch.Generator().manual_seed(0))
+    masks = torch.rand(16, 30, generator=torch.Generator().manual_seed(1)) > 0.3
+    masks[:, 0] = True
+
+    def figures():
+        dist = MaskableCategorical(logits=logits)
+        dist.apply_masking(masks)
+        torch.manual_seed(2)
+        sample = dist.sample()
+        return dist.probs, dist.log_prob(sample), dist.entropy(), sample
+
+    default = Distribution._validate_args
+    try:
+        Distribution.set_default_validate_args(True)
+        checked = figures()
+        configure.cache_clear()
+        configure()
+        assert not Distribution._validate_args
+        for a, b in zip(checked, figures(), strict=True):
+            assert torch.equal(a, b)
+        with pytest.raises(RuntimeError, match="nan"):
+            MaskableCategorical(logits=torch.full((1, 3), float("nan"))).sample()
+    finally:
+        Distribution.set_default_validate_args(default)

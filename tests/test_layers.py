@@ -18,8 +18,8 @@ PACKAGE = SRC / "pirl"
 # The layers, lowest first; a module may import its own layer and the layers below it. Keep in
 # step with docs/architecture.md.
 LAYERS = (
-    ("pirl", "pirl._atomic", "pirl._numba_cache", "pirl._paths"),  # the root: atomic writes, cache
-    # folder, numba, env registration
+    ("pirl", "pirl._atomic", "pirl._numba_cache", "pirl._paths", "pirl._torch"),  # the root:
+    # atomic writes, cache folder, numba, torch's process settings, env registration
     ("pirl.config",),  # the action grid, the errors and every settings section
     ("pirl.world",),  # grid, scenarios, footprints, rules, metrics, planning queries
     ("pirl.env",),  # Gymnasium / SB3 environments over the world

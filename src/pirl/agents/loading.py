@@ -340,10 +340,12 @@ def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:
     """
     import gymnasium as gym
 
+    from pirl._torch import configure as configure_torch
     from pirl.agents.schedules import learning_rate_of
     from pirl.env.observation import obs_size_for
     from pirl.world.dynamics import N_ACTIONS
 
+    configure_torch()
     path = Path(path)
     data = sb3_entries(path)
     try:

@@ -33,6 +33,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
 from pirl._atomic import replacing
+from pirl._torch import configure as configure_torch
 from pirl.agents import checkpoint
 from pirl.agents.methods import METHODS, PPO_ARTIFACT, PPO_METHODS, TRAIN_PPO, Method
 from pirl.agents.run_folder import (
@@ -208,6 +209,7 @@ def build_ppo(env: VecMonitor, cfg: RunConfig, seed: int, tb_dir: Path | None) -
 
     With ``ppo.action_masking`` it is sb3-contrib's ``MaskablePPO``, which asks the env stack
     for ``action_masks()`` at every step (PARE and VecMonitor pass the call through)."""
+    configure_torch()
     p = cfg.ppo
     learning_rate = learning_rate_of(p)
     algo = PPO
