@@ -183,8 +183,6 @@ def run_chunk(
     """Play ``spec`` on each seed of ``size`` (or of the site folder ``size`` names) acting
     ``act``; one record per episode. ``uavs`` plays a fleet of that many UAVs
     (:func:`~pirl.evaluate.fleet.run_fleet_episode`); None the single UAV."""
-    import torch
-
     from pirl import _quiet
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_batch, run_episode
@@ -192,7 +190,6 @@ def run_chunk(
     _quiet.install()  # a worker process: no third-party banners or deprecation noise
     if sim == Sim.PHYSICS:
         _quiet.import_quietly("pybullet")
-    torch.set_num_threads(1)
     config = RunConfig.from_dict(config_dict)
     # Evaluation scenarios start at the env's camera pose, whatever a run trained from.
     env_cfg = VCPPConfig.from_dict(env_dict).replace(start_camera="fixed")
@@ -207,6 +204,11 @@ def run_chunk(
     else:
         env_cfg = env_cfg.replace(size=tuple(size))
         where = {"size": size_name(size)}
+    if spec.source not in BUILTIN or spec.advisor is not None:  # a network plays: one
+        # core's share (a planner or random policy plays without torch: ~3 CPU-s less)
+        import torch
+
+        torch.set_num_threads(1)
     policy = _policy(spec, config)
     if act != FIXED:
         policy.set_act(act)

@@ -104,15 +104,16 @@ def _quiet_rliable():
 def interval_estimates(scores: np.ndarray, reps: int = BOOTSTRAP_REPS) -> dict[str, float]:
     """Mean and IQM of a (runs, tasks) score matrix with stratified bootstrap 95% intervals
     (rliable; fixed generator, so a summary is reproducible)."""
+    if scores.shape[0] == 1:  # one run: no spread over runs to resample (and no rliable
+        # import, ~4 CPU-s with arch's pandas and scipy, for a planner's or one run's summary)
+        value = float(scores.mean())
+        return dict(mean=value, mean_lo=value, mean_hi=value, iqm=value, iqm_lo=value,
+                    iqm_hi=value)  # fmt: skip
     library, metrics = _quiet_rliable()
 
     def both(x: np.ndarray) -> np.ndarray:
         return np.array([metrics.aggregate_mean(x), metrics.aggregate_iqm(x)])
 
-    if scores.shape[0] == 1:  # one run: no spread over runs to resample
-        value = float(scores.mean())
-        return dict(mean=value, mean_lo=value, mean_hi=value, iqm=value, iqm_lo=value,
-                    iqm_hi=value)  # fmt: skip
     with _bootstrap_seed():
         point, ci = library.get_interval_estimates(
             {"x": scores}, both, reps=reps, random_state=np.random.RandomState(0)
