@@ -19,34 +19,25 @@ import torch
 from sb3_contrib import MaskablePPO
 
 from pirl._atomic import replacing, write_json
-from pirl.agents.methods import IL, IMITATION_ARTIFACT, PPO_METHODS, method
+from pirl.agents.methods import IL, IMITATION_ARTIFACT, method
 from pirl.agents.run_folder import (
     RunFolder,
     git_commit,
     prepare_run_folder,
     train_seed_base,
 )
-from pirl.config.errors import UserError
 from pirl.config.run import RunConfig
 from pirl.env.sb3_vec import make_vec_env
 
 
 def load_expert(expert_run: Path) -> Any:
     """The expert's PPO model, checked before an IL run folder is made: the run must exist,
-    be a finished PPO run and hold a model that loads."""
-    from pirl.agents.loading import PPOPolicy
+    be a finished PPO run and hold a model that loads (:func:`check_expert`, then the
+    weights)."""
+    from pirl.agents.loading import PPOPolicy, check_expert
 
-    expert = RunFolder(Path(expert_run))
-    if not expert.path.is_dir():
-        raise UserError(f"--expert {expert_run}: no such run folder")
-    method = expert.method
-    if method not in PPO_METHODS:
-        raise UserError(
-            f"--expert {expert_run} is a {method} run, not a finished PPO run "
-            f"({', '.join(PPO_METHODS)})"
-        )
-    IL.check_expert(str(expert_run), method)
-    return PPOPolicy(expert.model_file(), method, masked=expert.masked).model
+    expert = check_expert(expert_run)
+    return PPOPolicy(expert.model_file(), expert.method, masked=expert.masked).model
 
 
 def collect_expert(

@@ -11,7 +11,15 @@ from typing import Any
 
 import numpy as np
 
-from pirl.agents.methods import BUILTIN, TRAIN_IMITATION, label, method, trained_method
+from pirl.agents.methods import (
+    BUILTIN,
+    IL,
+    PPO_METHODS,
+    TRAIN_IMITATION,
+    label,
+    method,
+    trained_method,
+)
 from pirl.agents.policy import Policy
 from pirl.agents.run_folder import RETRAIN, RunFolder, short_error
 from pirl.config.choices import Act
@@ -328,6 +336,24 @@ def sb3_entries(path: Path) -> dict[str, Any]:
                 "model.zip written by pirl names none of these: do not use this run"
             )
     return data
+
+
+def check_expert(expert_run: Path) -> RunFolder:
+    """An imitation expert, checked without torch (so a wrong ``--expert`` is refused in a
+    second, before IL's libraries load): an existing, finished run of the PPO method IL
+    learns from, whose model.zip is whole and names nothing that would run code."""
+    expert = RunFolder(Path(expert_run))
+    if not expert.path.is_dir():
+        raise UserError(f"--expert {expert_run}: no such run folder")
+    expert_method = expert.method
+    if expert_method not in PPO_METHODS:
+        raise UserError(
+            f"--expert {expert_run} is a {expert_method} run, not a finished PPO run "
+            f"({', '.join(PPO_METHODS)})"
+        )
+    IL.check_expert(str(expert_run), expert_method)
+    sb3_entries(expert.model_file())
+    return expert
 
 
 def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:

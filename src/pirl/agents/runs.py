@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from pirl.advice.registry import advisor_kind
+from pirl.agents.loading import check_expert
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
 from pirl.agents.run_folder import RunFolder
 from pirl.agents.settings import check_fleet_training, method_config, resolve_settings
@@ -112,12 +113,13 @@ def train_run(
         advisor_kind(cfg.pare.advisor).check_key(cfg)
     check_layouts(cfg.env, [cfg.env.size], cfg.ppo.n_envs)
     if entry.training == TRAIN_IMITATION:
-        from pirl.agents.imitation import train_il
-
         if expert is None:
             raise ConfigError(
                 f"--method {method} needs --expert runs/<a finished {entry.expert} run>"
             )
+        check_expert(expert)  # before torch, SB3 and TabNet load (about 5 CPU-s)
+        from pirl.agents.imitation import train_il
+
         return train_il(cfg, expert, out, seed=seed, resume=resume)
     if student is not None and (not entry.advised or cfg.pare.mode != PareMode.STUDENT):
         advised = " or ".join(m.name for m in METHODS.values() if m.advised)
