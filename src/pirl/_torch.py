@@ -1,4 +1,4 @@
-"""torch as PIRL runs it, set once per process before a policy or a student is built.
+"""torch as PIRL runs it, set once per process before a policy is built or loaded.
 
 One of torch's defaults costs time in every process that trains or loads a policy and
 changes no number: **the argument checks of ``torch.distributions``**. Every action
