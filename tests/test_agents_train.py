@@ -50,8 +50,32 @@ def test_same_seed_same_model(tmp_path):
     assert not _same_weights(a, c)
 
 
+def _stopped(pid: int) -> bool:
+    # /proc/PID/stat: "pid (comm) state ..."; T = stopped by a signal.
+    stat = Path(f"/proc/{pid}/stat").read_text()
+    return stat[stat.rindex(")") + 2] in "TtZ"
+
+
+def _interrupt_at(proc: subprocess.Popen, latest: Path, step: int, limit: float = 240) -> None:
+    """Let ``proc`` run in 20 ms slices and look at its checkpoint only while it is stopped
+    (SIGSTOP), then Ctrl-C it in the first pause after the checkpoint reaches ``step``: the
+    run cannot finish between the look and the signal, however fast the machine."""
+    deadline = time.time() + limit
+    while time.time() < deadline and proc.poll() is None:
+        proc.send_signal(signal.SIGSTOP)
+        while not _stopped(proc.pid):
+            time.sleep(0.001)
+        if latest.exists() and int(latest.read_text().split("_")[1]) >= step:
+            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signal.SIGCONT)
+            return
+        proc.send_signal(signal.SIGCONT)
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGCONT)
+
+
 def test_ctrl_c_then_resume_matches_an_uninterrupted_run(tmp_path):
-    steps = "16384"  # long enough that Ctrl-C lands mid-run on a fast, idle machine
+    steps = "2048"  # 16 rollouts; the Ctrl-C lands after the 8th whatever the machine's pace
     cmd = [
         sys.executable, "-m", "pirl", "train", "--method", "ppo-ewri", "--config",
         str(TEST_CFG), "--seed", "2", "--steps", steps,
@@ -66,12 +90,7 @@ def test_ctrl_c_then_resume_matches_an_uninterrupted_run(tmp_path):
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     latest = out / "checkpoints" / "LATEST"
-    deadline = time.time() + 240
-    while time.time() < deadline:
-        if latest.exists() and int(latest.read_text().split("_")[1]) >= 1024:
-            break
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    _interrupt_at(proc, latest, 1024)
     proc.communicate(timeout=120)
     assert proc.returncode == 130, "Ctrl-C must stop the run and report the checkpoint"
     assert not (out / "model.zip").exists()
