@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from pirl.config.run import RunConfig
-from pirl.reproduce.pipeline import reproduce
+from pirl.reproduce.pipeline import reproduce, train_all
 from report_view import check_first_screen, render
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,7 +112,8 @@ def test_an_interrupted_run_resumes_from_its_checkpoint(reproduced):
     (run / "meta.json").write_text(json.dumps(meta))
     (run / "model.zip").unlink()
     logs: list[str] = []
-    reproduce(cfg, out, advisor="oracle", log=logs.append, show_progress=False)
+    # The reproduction's training stage (check, lock, plan, run), without evaluating again.
+    train_all(cfg, out, "oracle", logs.append, show_progress=False)
     assert "ppo-sr-s0: resuming" in logs
     assert json.loads((run / "meta.json").read_text())["complete"]
 
@@ -130,8 +131,6 @@ def _probabilities(run: Path):
 
 def test_parallel_training_gives_the_same_models_as_sequential(tmp_path):
     import numpy as np
-
-    from pirl.reproduce.pipeline import train_all
 
     cfg = RunConfig.from_yaml(ROOT / "configs" / "test.yaml").with_overrides(
         reproduce={"methods": ["ppo-sr", "ppo-ewri", "il"], "seeds": [0]}
@@ -164,7 +163,11 @@ def test_the_camera_study_profile_loads_and_runs_at_test_size(tmp_path):
     for section in ("env", "ppo", "train", "il"):  # the study's design at the test's budgets
         study[section] = tiny[section]
     # No teacher phase here (tests/test_teacher_phase.py runs one): 200 LLM answers take minutes.
-    study["reproduce"].update(seeds=[0], sizes=["12"], episodes=2, teacher_phase_answers=0)
+    # Evaluation in this process (workers 1): a pool's two fresh interpreters would import
+    # torch and the env again for 24 small episodes; test_evaluate checks pools give the same.
+    study["reproduce"].update(
+        seeds=[0], sizes=["12"], episodes=2, teacher_phase_answers=0, workers=1
+    )
     cfg = RunConfig.from_dict(study)
     logs: list[str] = []
     report = reproduce(cfg, tmp_path, advisor="local", log=logs.append, show_progress=False)
