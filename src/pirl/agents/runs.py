@@ -17,7 +17,13 @@ from pirl.advice.registry import advisor_kind
 from pirl.agents.loading import check_expert
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
 from pirl.agents.run_folder import RunFolder
-from pirl.agents.settings import check_fleet_training, method_config, resolve_settings
+from pirl.agents.settings import (
+    check_fleet_training,
+    check_resume,
+    method_config,
+    resolve_settings,
+    resolved_config,
+)
 from pirl.config.choices import PareMode
 from pirl.config.errors import ConfigError
 from pirl.config.load import check_seed
@@ -124,6 +130,10 @@ def train_run(
     if student is not None and (not entry.advised or cfg.pare.mode != PareMode.STUDENT):
         advised = " or ".join(m.name for m in METHODS.values() if m.advised)
         raise ConfigError(f"--student needs --method {advised} with pare.mode student")
+    if resume:
+        # A run this command does not describe is refused before torch and SB3 load (about
+        # 5 CPU-s); train() checks again under the folder's lock, and says what it extends.
+        check_resume(own, method, resolved_config(method, cfg), seed, log=lambda _line: None)
     from pirl.agents.train import train  # torch and SB3: only once everything is checked
 
     return train(method, cfg, out, seed=seed, resume=resume, student=None if resume else student)

@@ -9,10 +9,19 @@ settings again.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from pirl.agents.methods import TRAIN_PPO, trained_method
+from pirl.agents import checkpoint
+from pirl.agents.methods import (
+    METHODS,
+    PPO_ARTIFACT,
+    PPO_METHODS,
+    TRAIN_PPO,
+    Method,
+    trained_method,
+)
 from pirl.agents.run_folder import RunFolder
 from pirl.config.errors import ConfigError
 from pirl.config.presets import load_preset
@@ -101,10 +110,93 @@ def check_fleet_training(cfg: RunConfig, imitation: bool) -> None:
         )
 
 
+def ppo_method(name: str) -> Method:
+    """The entry of a PPO method; one line naming the PPO methods for any other name."""
+    entry = METHODS.get(name)
+    if entry is None or entry.training != TRAIN_PPO:
+        raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
+    return entry
+
+
+def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
+    """``cfg`` with the env the method trains and is judged on (its reward weights, the LLM
+    weight for an advised method): what config.yaml records and evaluations rebuild."""
+    return replace(cfg, env=ppo_method(method).trains_on(cfg.env))
+
+
+# -- a PPO run's settings: resolved_config, check_resume ------------------------------------
+# Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
+# `pirl reproduce` does around it, how the physics simulator evaluates it and the memory limit
+# of its worlds (env.max_memory_gb, a property of the machine). Everything else
+# that the method uses (PARE and the advisor for PIRL only) must match the run's config.yaml.
+RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.", "env.max_memory_gb")
+
+
+def check_resume(run: RunFolder, method: str, cfg: RunConfig, seed: int, log: Any) -> RunConfig:
+    """Before anything is built: the run in ``run`` must be the one this command describes.
+
+    ``cfg`` is resolved (:func:`resolved_config`), as the run's own config.yaml is. A
+    different method, seed or config value (advisor included) is refused with a message naming
+    both values. A larger ``train.total_steps`` extends the run (said in one line). Returns the
+    config to continue with: the run's own, with this command's ``train`` settings.
+    """
+    if not run.path.is_dir():
+        raise ConfigError(f"--resume: run folder {run.path} does not exist")
+    if not run.meta_file.is_file() or not run.has_config:
+        if checkpoint.latest(run.checkpoints) is None and not (run.path / PPO_ARTIFACT).exists():
+            return cfg  # stopped before the run was recorded: nothing to continue, start it
+        raise ConfigError(f"--resume: {run.path} is not a run folder (no meta.json or config.yaml)")
+    run.check_resumes(method, seed)
+    saved = run.config
+    old, new = _flat(saved.to_dict()), _flat(cfg.to_dict())
+    unused = () if ppo_method(method).advised else ("pare.", "advisor.")
+    free = RESUME_MAY_CHANGE + ("il.", *unused)
+    for key in sorted(old.keys() | new.keys()):
+        if key.startswith(free) or old.get(key) == new.get(key):
+            continue
+        raise ConfigError(
+            f"--resume: {run.path} was trained with {key}={old.get(key)!r}; this command gives "
+            f"{key}={new.get(key)!r}; resume takes the run's own settings (leave the option "
+            "out) or choose a new --out"
+        )
+    # meta.json records the whole-rollout count that runs; compare like with like.
+    before = int(run.meta.get("total_steps") or 0)
+    after = whole_steps(saved, cfg.train.total_steps)
+    if after > before:
+        log(f"resume: extending {run.path} from {before:,} to {after:,} steps")
+    elif after < before:
+        raise ConfigError(
+            f"--resume: {run.path} was set to train {before:,} steps; --steps {after:,} would "
+            "cut it short (give at least that many, or leave --steps out)"
+        )
+    return replace(saved, train=cfg.train, reproduce=cfg.reproduce)
+
+
+def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def whole_steps(cfg: RunConfig, steps: int) -> int:
+    """``steps`` rounded up to whole rollouts (n_envs x n_steps): the steps PPO really runs."""
+    rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
+    return -(-steps // rollout) * rollout
+
+
 __all__ = [
+    "RESUME_MAY_CHANGE",
     "check_budgets",
     "check_fleet_training",
+    "check_resume",
     "method_config",
     "method_steps",
+    "ppo_method",
     "resolve_settings",
+    "resolved_config",
+    "whole_steps",
 ]

@@ -2,8 +2,8 @@
 
 ``train()`` is what ``pirl train`` calls. Reading it in order follows one run:
 
-0. The config is settled once: :func:`resolved_config` (the method's env) and, on resume,
-   :func:`check_resume` against the run's own files.
+0. The config is settled once (:mod:`pirl.agents.settings`): ``resolved_config`` (the
+   method's env) and, on resume, ``check_resume`` against the run's own files.
 1. PIRL only: the advice (teacher, probe, student), before any folder exists.
 2. :func:`~pirl.agents.run_folder.prepare_run_folder` refuses to overwrite a run, or finds the
    checkpoint to resume; a new run's :class:`~pirl.agents.run_folder.RunFolder` records
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import csv
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +35,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from pirl._atomic import replacing
 from pirl._torch import configure as configure_torch
 from pirl.agents import checkpoint
-from pirl.agents.methods import METHODS, PPO_ARTIFACT, PPO_METHODS, TRAIN_PPO, Method
+from pirl.agents.methods import PPO_ARTIFACT
 from pirl.agents.run_folder import (
     RunFolder,
     git_commit,
@@ -45,6 +45,7 @@ from pirl.agents.run_folder import (
     train_seed_base,
 )
 from pirl.agents.schedules import learning_rate_of
+from pirl.agents.settings import check_resume, ppo_method, resolved_config, whole_steps
 from pirl.agents.stops import TrainingInterrupted, TrainingStopped
 from pirl.config.choices import DatasetScope, PareMode
 from pirl.config.errors import ConfigError
@@ -72,20 +73,6 @@ def fleet_note(cfg: RunConfig) -> str:
     return f" [{'; '.join(parts)}]" if parts else ""
 
 
-def ppo_method(name: str) -> Method:
-    """The entry of a PPO method; one line naming the PPO methods for any other name."""
-    entry = METHODS.get(name)
-    if entry is None or entry.training != TRAIN_PPO:
-        raise ConfigError(f"method {name!r}: PPO methods are {', '.join(PPO_METHODS)}")
-    return entry
-
-
-def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
-    """``cfg`` with the env the method trains and is judged on (its reward weights, the LLM
-    weight for an advised method): what config.yaml records and evaluations rebuild."""
-    return replace(cfg, env=ppo_method(method).trains_on(cfg.env))
-
-
 def training_env(cfg: RunConfig) -> VCPPConfig:
     """The resolved env with ``train.camera_start``, ``surveyed_start``, ``obstacles`` and
     ``stall_guard`` applied: exploring starts, work out of sight, denser worlds and training
@@ -100,64 +87,6 @@ def training_env(cfg: RunConfig) -> VCPPConfig:
     if cfg.train.stall_guard is not None:
         env = env.replace(stall_guard=int(cfg.train.stall_guard))
     return env
-
-
-# -- 1. settling the run: resolved_config, check_resume --------------------------------------
-# Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
-# `pirl reproduce` does around it, how the physics simulator evaluates it and the memory limit
-# of its worlds (env.max_memory_gb, a property of the machine). Everything else
-# that the method uses (PARE and the advisor for PIRL only) must match the run's config.yaml.
-RESUME_MAY_CHANGE = ("train.", "reproduce.", "physics.", "env.max_memory_gb")
-
-
-def check_resume(run: RunFolder, method: str, cfg: RunConfig, seed: int, log: Any) -> RunConfig:
-    """Before anything is built: the run in ``run`` must be the one this command describes.
-
-    ``cfg`` is resolved (:func:`resolved_config`), as the run's own config.yaml is. A
-    different method, seed or config value (advisor included) is refused with a message naming
-    both values. A larger ``train.total_steps`` extends the run (said in one line). Returns the
-    config to continue with: the run's own, with this command's ``train`` settings.
-    """
-    if not run.path.is_dir():
-        raise ConfigError(f"--resume: run folder {run.path} does not exist")
-    if not run.meta_file.is_file() or not run.has_config:
-        if checkpoint.latest(run.checkpoints) is None and not (run.path / PPO_ARTIFACT).exists():
-            return cfg  # stopped before the run was recorded: nothing to continue, start it
-        raise ConfigError(f"--resume: {run.path} is not a run folder (no meta.json or config.yaml)")
-    run.check_resumes(method, seed)
-    saved = run.config
-    old, new = _flat(saved.to_dict()), _flat(cfg.to_dict())
-    unused = () if ppo_method(method).advised else ("pare.", "advisor.")
-    free = RESUME_MAY_CHANGE + ("il.", *unused)
-    for key in sorted(old.keys() | new.keys()):
-        if key.startswith(free) or old.get(key) == new.get(key):
-            continue
-        raise ConfigError(
-            f"--resume: {run.path} was trained with {key}={old.get(key)!r}; this command gives "
-            f"{key}={new.get(key)!r}; resume takes the run's own settings (leave the option "
-            "out) or choose a new --out"
-        )
-    # meta.json records the whole-rollout count that runs; compare like with like.
-    before = int(run.meta.get("total_steps") or 0)
-    after = whole_steps(saved, cfg.train.total_steps)
-    if after > before:
-        log(f"resume: extending {run.path} from {before:,} to {after:,} steps")
-    elif after < before:
-        raise ConfigError(
-            f"--resume: {run.path} was set to train {before:,} steps; --steps {after:,} would "
-            "cut it short (give at least that many, or leave --steps out)"
-        )
-    return replace(saved, train=cfg.train, reproduce=cfg.reproduce)
-
-
-def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 # -- 2. environments ------------------------------------------------------------------------
@@ -347,12 +276,6 @@ def _truncate_csv(path: Path, rows: int) -> None:
         lines = fh.read().splitlines(keepends=True)
     with open(path, "w", newline="") as fh:
         fh.write("".join(lines[: rows + 1]))
-
-
-def whole_steps(cfg: RunConfig, steps: int) -> int:
-    """``steps`` rounded up to whole rollouts (n_envs x n_steps): the steps PPO really runs."""
-    rollout = cfg.ppo.n_envs * cfg.ppo.n_steps
-    return -(-steps // rollout) * rollout
 
 
 # -- the whole run ---------------------------------------------------------------------------
