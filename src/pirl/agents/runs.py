@@ -16,7 +16,7 @@ from typing import Any
 from pirl.advice.registry import advisor_kind
 from pirl.agents.loading import check_expert
 from pirl.agents.methods import METHODS, TRAIN_IMITATION, trained_method
-from pirl.agents.run_folder import RunFolder
+from pirl.agents.run_folder import RunFolder, lock_folder
 from pirl.agents.settings import (
     check_fleet_training,
     check_resume,
@@ -131,8 +131,11 @@ def train_run(
         advised = " or ".join(m.name for m in METHODS.values() if m.advised)
         raise ConfigError(f"--student needs --method {advised} with pare.mode student")
     if resume:
-        # A run this command does not describe is refused before torch and SB3 load (about
-        # 5 CPU-s); train() checks again under the folder's lock, and says what it extends.
+        # A second writer, or a run this command does not describe, is refused before torch
+        # and SB3 load (about 5 CPU-s), in train()'s order: the lock (train() takes it again
+        # as a no-op), then the run's own files; train() checks again and says what it extends.
+        if own.path.is_dir():
+            lock_folder(own.path)
         check_resume(own, method, resolved_config(method, cfg), seed, log=lambda _line: None)
     from pirl.agents.train import train  # torch and SB3: only once everything is checked
 
