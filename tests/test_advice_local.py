@@ -66,10 +66,14 @@ def advisor():
 
 
 @pytest.fixture(scope="module")
-def advisor_f32():
+def advisor_f32(advisor: LocalAdvisor):
     """float32, so that rounding cannot flip a greedy choice; loaded once for the tests that
     pin answers (each takes its own ``with_settings()`` copy: the same model, no kept prefixes).
+    Where float32 is the default (a CPU without bfloat16 matmuls) it is ``advisor``'s model.
     """
+    if advisor.dtype == "float32":
+        yield advisor.with_settings(batch_size=8)
+        return
     threads = torch.get_num_threads()
     adv = LocalAdvisor(num_threads=1, batch_size=8, dtype="float32")
     yield adv
