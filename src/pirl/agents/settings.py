@@ -110,6 +110,7 @@ def check_fleet_training(cfg: RunConfig, imitation: bool) -> None:
         )
 
 
+# -- a PPO run's settings: resolved_config, check_resume ------------------------------------
 def ppo_method(name: str) -> Method:
     """The entry of a PPO method; one line naming the PPO methods for any other name."""
     entry = METHODS.get(name)
@@ -124,7 +125,6 @@ def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
     return replace(cfg, env=ppo_method(method).trains_on(cfg.env))
 
 
-# -- a PPO run's settings: resolved_config, check_resume ------------------------------------
 # Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what
 # `pirl reproduce` does around it, how the physics simulator evaluates it and the memory limit
 # of its worlds (env.max_memory_gb, a property of the machine). Everything else
