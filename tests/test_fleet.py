@@ -161,21 +161,51 @@ def test_bad_fleets_are_one_line():
         crowded.reset(seed=0)
 
 
-def test_area_split_is_balanced_connected_and_respects_walls():
-    from pirl.world.split import geodesic, split_area, split_balance
+def test_the_sweep_is_cut_into_consecutive_pieces_that_finish_together():
+    from pirl.world.split import cut_sweep
 
-    passable = np.ones((30, 20), dtype=bool)
-    passable[15, 0:17] = False  # a wall with a gap at the top
-    ground = np.ones((30, 20), dtype=bool)
-    starts = [(2, 2), (3, 2), (2, 3), (3, 3)]
-    owner = split_area(passable, ground, starts)
-    assert split_balance(owner, 4) <= 1.1
-    assert (owner[passable] >= 0).all()
-    for u in range(4):  # every part is one piece: one cell of it reaches all, inside it
-        part = (owner == u) & passable
-        first = tuple(int(v) for v in np.argwhere(part)[0])
-        dist = geodesic(part, first)
-        assert (dist[part] < np.iinfo(np.int64).max // 4).all()
+    # One lane of 40 points along x, the launch at its start: transit grows along the lane.
+    points = np.array([(x, 0) for x in range(40)])
+    transit = np.arange(40)
+    pieces = cut_sweep(points, transit, 4)
+    assert pieces[0].start == 0 and pieces[-1].stop == 40 and len(pieces) <= 4
+    assert all(a.stop == b.start for a, b in zip(pieces, pieces[1:], strict=False))
+    for p in pieces:  # a piece's moves: the way to its nearer end, then through it
+        ways = (transit[p.start], transit[p.stop - 1])
+        assert p.moves == min(ways) + (p.stop - p.start - 1)
+        assert p.backwards == (ways[1] < ways[0])
+    assert max(p.moves for p in pieces) == 39  # the last point is 39 moves out: no cut helps
+    assert [p.stop - p.start for p in cut_sweep(points, np.zeros(40), 4)] == [10, 10, 10, 10]
+    # Four lanes of a serpentine, 3 apart, launched from a corner: one UAV needs 48 moves;
+    # four finish by 18, the moves to the far lane's nearer end and along it.
+    lanes = [[(x, y) for x in (range(10) if y % 2 == 0 else range(9, -1, -1))] for y in range(4)]
+    points = np.array([(x, 3 * y) for lane in lanes for x, y in lane])
+    pieces = cut_sweep(points, points.sum(axis=1), 4)
+    assert len(pieces) == 4 and max(p.moves for p in pieces) <= 18
+    assert len(cut_sweep(points[:2], np.zeros(2), 4)) <= 2  # too short to share: fewer pieces
+
+
+def test_planner_fleet_parts_cover_the_ground_round_walls():
+    from pirl.agents.boustrophedon import fleet_planners
+    from pirl.config.world import VCPPConfig
+    from pirl.env.core import EnvCore
+    from pirl.world.planning import WorldView
+    from pirl.world.split import UNREACHABLE, geodesic
+
+    cfg = VCPPConfig(size=(30, 20, 3), uavs=4)
+    core = EnvCore(cfg, 1)
+    core.reset_world(0, np.random.default_rng(3))
+    world = core.world
+    view = WorldView.of(world, 0)
+    team = fleet_planners(world, 0)
+    parts = np.stack([p.part for p in team])
+    assert (parts.sum(axis=0) == view.coverable).all()  # every ground cell, one owner
+    for p in team:
+        z = p.lanes[0][2]
+        launch = geodesic(~view.blocked[:, :, z], world.position(0)[:2])
+        assert all(launch[c[:2]] < UNREACHABLE for c in p.lanes)  # round walls, from the launch
+        # consecutive lane points, one lane or the next one apart
+        assert all(abs(a[0] - b[0]) + abs(a[1] - b[1]) >= 1 for a, b in zip(p.lanes, p.lanes[1:]))
 
 
 def test_planner_fleet_covers_a_world_and_is_faster_than_one_uav():

@@ -11,10 +11,10 @@ moving along shortest free paths (replanned when wind pushes it off), so it goes
 obstacles. It never plans a leg it cannot pay for: a target whose path costs more energy than
 is left is dropped.
 
-A fleet (``env.uavs`` > 1) runs one planner per UAV, each given its part of the area split
-(:func:`pirl.world.split.split_area`: balanced connected parts grown from the UAVs' starts):
-it sweeps its own part, then helps with whatever is left anywhere; a teammate in the way is an
-obstacle for that step's path (:func:`fleet_planners`).
+A fleet (``env.uavs`` > 1) runs one planner per UAV, each given its piece of the sweep one UAV
+would fly (:func:`pirl.world.split.cut_sweep`: consecutive pieces that finish together) and
+the ground that piece sees first: it sweeps its own piece, then helps with whatever is left
+anywhere; a teammate in the way is an obstacle for that step's path (:func:`fleet_planners`).
 """
 
 from __future__ import annotations
@@ -33,8 +33,9 @@ from pirl.world.planning import (
     bfs_path,
     largest_footprint_camera,
     nearest,
+    useful_map,
 )
-from pirl.world.split import split_area
+from pirl.world.split import UNREACHABLE, cut_sweep, geodesic, owner_by_anchor
 from pirl.world.state import WorldBatch
 
 _MOVE_ACTION = {delta: action for action, delta in enumerate(MOVE_DELTAS)}
@@ -63,10 +64,12 @@ class BoustrophedonPolicy(Policy):
     name = "boustrophedon"
     label = "boustrophedon (planner, not learned)"
 
-    def __init__(self, part: np.ndarray | None = None) -> None:
+    def __init__(self, part: np.ndarray | None = None, lanes: list[Cell] | None = None) -> None:
         self.world: WorldBatch | None = None
         self.part = part
         """(X, Y) ground cells this UAV sweeps first (a fleet's); None: all of them."""
+        self.lanes = lanes
+        """Its lane points in flying order (a fleet's piece of the sweep); None: the sweep."""
 
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         self.world, self.e = world, index
@@ -80,28 +83,11 @@ class BoustrophedonPolicy(Policy):
         self.sweeping = True
 
     def _lanes(self, view: WorldView) -> list[Cell]:
-        """Serpentine lane points at the sweep altitude, spaced by the footprint's width across
-        the lane: along x over the whole grid, or, for a fleet's part, over the part's bounding
-        box along whichever axis needs fewer lanes, from the corner nearest the UAV."""
-        sx, sy, _ = view.cfg.size
-        cx, cy = sx // 2, sy // 2
-        fp = view.footprint((cx, cy, self.altitude), self.camera)
-        reach = {  # (nearest, farthest) footprint offset across a lane of each axis
-            0: (int(fp[:, 1].min()) - cy, int(fp[:, 1].max()) - cy),
-            1: (int(fp[:, 0].min()) - cx, int(fp[:, 0].max()) - cx),
-        }
-        if self.part is None or not self.part.any():
-            return _serpentine(0, sx - 1, 0, sy - 1, reach[0], 0, self.altitude)
-        xs, ys = np.nonzero(self.part)
-        box = (int(xs.min()), int(xs.max()), int(ys.min()), int(ys.max()))
-        start = view.position
-        best: list[Cell] = []
-        for axis in (0, 1):
-            for flip in (False, True):
-                points = _serpentine(*box, reach[axis], axis, self.altitude, flip)
-                if not best or _lanes_cost(points, start) < _lanes_cost(best, start):
-                    best = points
-        return best
+        """Serpentine lane points along x at the sweep altitude, spaced by the footprint's
+        width across the lane, or a fleet's piece of such a sweep."""
+        if self.lanes is not None:
+            return list(self.lanes)
+        return _serpentine(_lane_rows(view, self.camera, self.altitude, axis=0))
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         if self.world is None:
@@ -163,54 +149,98 @@ class BoustrophedonPolicy(Policy):
         return None, []
 
 
-def _serpentine(
-    x0: int,
-    x1: int,
-    y0: int,
-    y1: int,
-    reach: tuple[int, int],
-    axis: int,
-    z: int,
-    flip: bool = False,
-) -> list[Cell]:
-    """Lane points over the box ``[x0, x1] x [y0, y1]``: lanes along x (``axis`` 0, one per
-    footprint width in y) or along y (``axis`` 1); ``flip`` starts at the far lane and the
-    far end. ``reach``: the footprint's (nearest, farthest) offset across a lane."""
-    lo, hi = (y0, y1) if axis == 0 else (x0, x1)
-    a0, a1 = (x0, x1) if axis == 0 else (y0, y1)
-    near, far = reach
+def _lane_rows(
+    view: WorldView, camera: tuple[int, int, int], z: int, axis: int
+) -> list[list[Cell]]:
+    """The sweep's lanes over the whole grid at altitude ``z``, each in its forward order: along
+    x (``axis`` 0, one lane per footprint width in y) or along y (``axis`` 1)."""
+    sx, sy, _ = view.cfg.size
+    cx, cy = sx // 2, sy // 2
+    fp = view.footprint((cx, cy, z), camera)
+    # The footprint's (nearest, farthest) offset across a lane.
+    near, far = (
+        (int(fp[:, 1].min()) - cy, int(fp[:, 1].max()) - cy)
+        if axis == 0
+        else (int(fp[:, 0].min()) - cx, int(fp[:, 0].max()) - cx)
+    )
+    hi, length = (sy - 1, sx) if axis == 0 else (sx - 1, sy)
     spacing = max(1, far - near + 1)
-    lanes = list(range(min(hi, max(lo, lo - near)), hi + 1, spacing))
+    lanes = list(range(min(hi, max(0, -near)), hi + 1, spacing))
     if lanes[-1] + far < hi:
         lanes.append(max(lanes[-1] + 1, min(hi, hi - far)))
-    if flip:
-        lanes.reverse()
+    return [[(a, lane, z) if axis == 0 else (lane, a, z) for a in range(length)] for lane in lanes]
+
+
+def _serpentine(rows: list[list[Cell]], first_backwards: bool = False) -> list[Cell]:
+    """The lanes flown one after the other, every other one backwards."""
     points: list[Cell] = []
-    for k, lane in enumerate(lanes):
-        along = range(a0, a1 + 1) if (k % 2 == 0) != flip else range(a1, a0 - 1, -1)
-        points.extend((a, lane, z) if axis == 0 else (lane, a, z) for a in along)
+    for k, row in enumerate(rows):
+        points.extend(row[::-1] if (k % 2 == 1) != first_backwards else row)
     return points
 
 
-def _lanes_cost(points: list[Cell], start: Cell) -> int:
-    """The moves of a sweep through ``points`` from ``start`` (the way there included)."""
-    a = np.array([start, *points])[:, :2]
-    return int(np.abs(np.diff(a, axis=0)).sum())
-
-
 def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
-    """One planner per UAV of world ``g`` (reset each with its slot), each given its part of
-    the area split at the sweep altitude (:func:`pirl.world.split.split_area`)."""
+    """One planner per UAV of world ``g`` (reset each with its slot), each given its piece of
+    the sweep one UAV would fly (:func:`pirl.world.split.cut_sweep`) and, as its part, the
+    ground its piece sees before any other piece does.
+
+    Of the eight sweeps over the grid (lanes along x or y, from either end, the first lane
+    either way) the one whose pieces finish earliest is cut. A lane point is kept when it is
+    free, reachable from the launch site and sees ground; the transit to a piece is counted
+    in moves round walls from UAV 1's start (its teammates start beside it)."""
     k = world.uavs
     if k == 1:  # the single UAV's own planner: a fleet of one flies as it does
         return [BoustrophedonPolicy()]
     view = WorldView.of(world, g * k)
     camera, altitude = largest_footprint_camera(view)
-    passable = ~view.blocked[:, :, altitude]
-    starts = [world.position(s)[:2] for s in range(g * k, g * k + k)]
-    # Ground a sweep covers per move: the area's ground over the single UAV's lane points.
-    sweep = BoustrophedonPolicy()
-    sweep.camera, sweep.altitude = camera, altitude
-    rate = float(view.coverable.sum()) / max(1, len(sweep._lanes(view)))
-    owner = split_area(passable, view.coverable, starts, cells_per_step=rate)
-    return [BoustrophedonPolicy(owner == u) for u in range(k)]
+    starts = [world.position(s) for s in range(g * k, g * k + k)]
+    launch = geodesic(~view.blocked[:, :, altitude], starts[0][:2])
+    sees = useful_map(view, camera, altitude)
+    best: tuple[int, list[Cell], list] | None = None
+    for axis in (0, 1):
+        rows = [
+            [p for p in row if launch[p[:2]] < UNREACHABLE and sees[p[:2]]]
+            for row in _lane_rows(view, camera, altitude, axis)
+        ]
+        rows = [row for row in rows if row]
+        for order in (rows, rows[::-1]):
+            for first_backwards in (False, True):
+                points = _serpentine(order, first_backwards)
+                if not points:
+                    continue
+                xy = np.array(points)[:, :2]
+                pieces = cut_sweep(xy, launch[xy[:, 0], xy[:, 1]], k)
+                makespan = max(p.moves for p in pieces)
+                if best is None or makespan < best[0]:
+                    best = (makespan, points, pieces)
+    if best is None:  # nothing to see from anywhere reachable: every UAV holds still
+        return [BoustrophedonPolicy() for _ in range(k)]
+    _, points, pieces = best
+    # Each ground cell to the first piece that sees it; cells no lane point sees to the
+    # piece of the nearest cell that has one.
+    owner = np.full(view.coverable.shape, -1, dtype=np.int64)
+    for r, piece in enumerate(pieces):
+        for p in points[piece.start : piece.stop]:
+            fp = view.footprint(p, camera)
+            fresh = fp[owner[fp[:, 0], fp[:, 1]] < 0]
+            owner[fresh[:, 0], fresh[:, 1]] = r
+    owner = np.where(view.coverable, owner, -1)
+    owner = owner_by_anchor(owner, view.coverable)
+    lanes = [
+        points[p.start : p.stop][::-1] if p.backwards else points[p.start : p.stop] for p in pieces
+    ]
+    # Pieces to UAVs: the nearest (UAV, first lane point) pair first.
+    cost = np.array(
+        [[abs(s[0] - ln[0][0]) + abs(s[1] - ln[0][1]) for ln in lanes] for s in starts],
+        dtype=np.float64,
+    )
+    piece_of = [-1] * k
+    for _ in range(len(lanes)):
+        u, r = np.unravel_index(np.argmin(cost), cost.shape)
+        piece_of[u] = int(r)
+        cost[u, :] = np.inf
+        cost[:, r] = np.inf
+    return [
+        BoustrophedonPolicy(owner == r, lanes[r]) if r >= 0 else BoustrophedonPolicy(owner < -1, [])
+        for r in piece_of  # a UAV without a piece (a sweep too short to share) only helps
+    ]

@@ -1,34 +1,28 @@
-"""A fleet's area split: the ground to cover cut into K balanced connected parts, one per UAV.
+"""A fleet's split: one UAV's sweep cut into K consecutive pieces that finish together.
 
 A fleet takes off from one launch site, so its UAVs' starts are neighbouring cells and
-cannot seed a split themselves (DARP, Kapoutsis et al. 2017, grows parts from the robots'
-positions; from one launch site its parts degenerate into thin slices or rings). Instead:
+cannot seed an area split themselves (DARP, Kapoutsis et al. 2017, grows parts from the
+robots' positions; from one launch site its parts degenerate into thin slices or rings).
+PIRL cuts the sweep one UAV would fly instead (tour splitting, as in Frederickson, Hecht and
+Kim 1978): the sweep's lane points in flying order, each piece flown by one UAV, which first
+flies from the launch site to the nearer end of its piece. :func:`cut_sweep` chooses the cuts
+so that the last UAV finishes as early as it can (the smallest makespan for which a greedy
+cut, each piece as long as the budget allows, needs at most K pieces, found by bisection).
 
-1. K seeds are spread over the free cells at the flight altitude by geodesic farthest-point
-   sampling (distances by moves around walls and no-fly zones);
-2. each cell goes to the seed whose distance plus bias is smallest, and the biases are tuned
-   until every part holds about the same number of ground cells; an additive bias keeps each
-   part connected by construction (every cell on a shortest way from a seed to a cell of its
-   part belongs to the part too, up to ties), where DARP's multiplicative weights need a
-   repair step;
-3. each seed moves to the cell of its part nearest the part's centre, and 2 repeats
-   (:data:`LLOYD_ROUNDS` rounds of Lloyd's iteration), so parts are compact, as a lawnmower
-   sweep wants;
-4. parts go to UAVs by distance from their starts (greedy, nearest pair first).
-
-Ground cells under an obstacle at the flight altitude belong to the part of the nearest free
-column, from which they are seen.
+Pieces of one sweep share no lane, so neighbouring UAVs' footprints overlap only where a
+piece ends mid-lane; a part grown around a seed shares every border with its neighbours'
+footprints (docs/fleets.md measures both).
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 UNREACHABLE = np.iinfo(np.int64).max // 4
-LLOYD_ROUNDS = 6
 
 
 @numba.njit(cache=True)
@@ -78,129 +72,63 @@ def _anchors(passable: np.ndarray) -> np.ndarray:
     return anchor
 
 
-def split_area(
-    passable: np.ndarray,
-    ground: np.ndarray,
-    starts: list[tuple[int, int]],
-    iterations: int = 200,
-    tolerance: float = 0.03,
-    cells_per_step: float = 0.0,
-) -> np.ndarray:
-    """The owner (0..K-1, a UAV) of each ground cell to cover (``ground``, (X, Y) bool), -1
-    for cells no start can reach or that are not ground.
+@dataclass(frozen=True)
+class Piece:
+    """Lane points ``start`` to ``stop - 1`` of a sweep, flown backwards when the last one is
+    nearer the launch site; ``moves`` is the transit to it plus the sweep through it."""
 
-    ``passable`` (X, Y) are the cells free at the flight altitude; ``starts`` the UAVs'
-    cells (x, y). Biases are tuned for at most ``iterations`` rounds per Lloyd round, until
-    the largest part holds at most ``1 + tolerance`` times its target. With
-    ``cells_per_step`` (how many ground cells a sweep covers per move) the targets balance
-    time rather than area: a part farther from the launch site holds fewer cells, by the
-    moves it takes to get there, so every UAV is due to finish at about the same step.
-    """
-    k = len(starts)
-    owner = np.full(ground.shape, -1, dtype=np.int64)
-    if k == 0:
-        return owner
-    reach = np.zeros(passable.shape, dtype=bool)
-    for s in starts:
-        reach |= geodesic(passable, s) < UNREACHABLE
-    anchor = _anchors(reach)
-    gx, gy = np.nonzero(ground & (anchor[..., 0] >= 0))
-    if not len(gx):
-        return owner
-    ax, ay = anchor[gx, gy, 0], anchor[gx, gy, 1]
-    if k == 1:
-        owner[gx, gy] = 0
-        return owner
-    seeds = _spread(reach, starts[0], k)
-    pick = np.zeros(len(gx), dtype=np.int64)
-    targets = np.full(k, len(gx) / k)
-    launch = geodesic(reach, starts[0]).astype(np.float64)[ax, ay]
-    for _ in range(LLOYD_ROUNDS):
-        dist = np.stack([geodesic(reach, c)[ax, ay] for c in seeds]).astype(np.float64)
-        pick = _balanced(dist, iterations, tolerance, targets)
-        moved = [_centre(gx[pick == r], gy[pick == r], reach, seeds[r]) for r in range(k)]
-        if cells_per_step > 0:
-            targets = _timed_targets(pick, launch, k, cells_per_step)
-        elif moved == seeds:
-            break
-        seeds = moved
-    # Parts to UAVs: the nearest (UAV, part) pair first.
-    cost = np.array([[geodesic(reach, s)[c] for c in seeds] for s in starts], dtype=np.float64)
-    part_of = np.full(k, -1, dtype=np.int64)
-    for _ in range(k):
-        u, r = np.unravel_index(np.argmin(cost), cost.shape)
-        part_of[r] = u
-        cost[u, :] = np.inf
-        cost[:, r] = np.inf
-    owner[gx, gy] = part_of[pick]
-    return owner
+    start: int
+    stop: int
+    backwards: bool
+    moves: int
 
 
-def _spread(reach: np.ndarray, launch: tuple[int, int], k: int) -> list[tuple[int, int]]:
-    """K cells spread over ``reach`` by geodesic farthest-point sampling from ``launch``."""
-    nearest = geodesic(reach, launch).astype(np.float64)
-    nearest[~reach] = -1
-    seeds: list[tuple[int, int]] = []
-    for _ in range(k):
-        c = np.unravel_index(int(np.argmax(nearest)), nearest.shape)
-        seeds.append((int(c[0]), int(c[1])))
-        d = geodesic(reach, seeds[-1]).astype(np.float64)
-        nearest = np.where(reach, np.minimum(nearest if len(seeds) > 1 else d, d), -1)
-    return seeds
+def cut_sweep(points: np.ndarray, transit: np.ndarray, k: int) -> list[Piece]:
+    """At most ``k`` consecutive pieces of the sweep ``points`` ((N, 2) cells in flying order),
+    the largest piece's ``moves`` as small as a greedy cut allows; ``transit`` (N) is the moves
+    from the launch site to each point. Pieces are in sweep order; fewer than ``k`` when the
+    sweep is too short to share."""
+    n = len(points)
+    if n == 0 or k < 1:
+        return []
+    steps = np.abs(np.diff(points, axis=0)).sum(axis=1) if n > 1 else np.zeros(0)
+    along = np.concatenate([[0], np.cumsum(steps)]).astype(np.int64)
+    transit = np.asarray(transit, dtype=np.int64)
+
+    def greedy(budget: int) -> list[Piece] | None:
+        pieces: list[Piece] = []
+        s = 0
+        while s < n:
+            if len(pieces) == k:
+                return None
+            inner = along[s:] - along[s]
+            ahead, back = transit[s] + inner, transit[s:] + inner
+            over = np.flatnonzero(np.minimum(ahead, back) > budget)
+            last = max(0, int(over[0]) - 1) if len(over) else n - s - 1
+            backwards = bool(back[last] < ahead[last])
+            moves = int(back[last] if backwards else ahead[last])
+            pieces.append(Piece(s, s + last + 1, backwards, moves))
+            s += last + 1
+        return pieces
+
+    lo, hi = int(transit.min()), int(along[-1] + transit.max())
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if greedy(mid) is None:
+            lo = mid + 1
+        else:
+            hi = mid
+    return greedy(lo) or []
 
 
-def _timed_targets(pick: np.ndarray, launch: np.ndarray, k: int, rate: float) -> np.ndarray:
-    """Part sizes that finish together: part r's UAV first flies to it (the moves from the
-    launch site to its nearest cell), then covers ``rate`` cells a move; sizes add up."""
-    n = len(pick)
-    transit = np.array([launch[pick == r].min() if (pick == r).any() else 0.0 for r in range(k)])
-    finish = (n / rate + transit.sum()) / k
-    sizes = np.maximum(1.0, (finish - transit) * rate)
-    return sizes * n / sizes.sum()
+def owner_by_anchor(owner: np.ndarray, ground: np.ndarray) -> np.ndarray:
+    """``owner`` with every ``ground`` cell that has none given the owner of its nearest owned
+    cell (by moves over the grid, walls ignored: a view reaches over them)."""
+    anchor = _anchors(owner >= 0)
+    out = owner.copy()
+    gx, gy = np.nonzero(ground & (owner < 0) & (anchor[..., 0] >= 0))
+    out[gx, gy] = owner[anchor[gx, gy, 0], anchor[gx, gy, 1]]
+    return out
 
 
-def _balanced(
-    dist: np.ndarray, iterations: int, tolerance: float, targets: np.ndarray | None = None
-) -> np.ndarray:
-    """Each cell's part (``dist``: (K, cells) distances to the seeds), by distance plus a
-    bias tuned until the parts hold about their ``targets`` numbers of cells (equal when
-    None); the most even seen."""
-    k, n = dist.shape
-    dist = np.where(dist >= UNREACHABLE, np.inf, dist)
-    target = np.full(k, n / k) if targets is None else np.asarray(targets, dtype=np.float64)
-    scale = max(1.0, float(np.median(dist[np.isfinite(dist)])))
-    bias = np.zeros(k)
-    best, best_load = np.argmin(dist, axis=0), np.inf
-    step = 0.5 * scale
-    for _ in range(iterations):
-        pick = np.argmin(dist + bias[:, None], axis=0)
-        sizes = np.bincount(pick, minlength=k)
-        load = (sizes / target).max()
-        if load < best_load:
-            best, best_load = pick, load
-        if load <= 1.0 + tolerance:
-            break
-        # A part over the mean grows its bias (its far cells go to a neighbour), one under
-        # shrinks it; the step shrinks as the split settles.
-        bias += step * (sizes - target) / target
-        step *= 0.97
-    return best
-
-
-def _centre(xs: np.ndarray, ys: np.ndarray, reach: np.ndarray, seed: tuple[int, int]):
-    """The cell of a part nearest its centre (the part's own cells, anchored), else ``seed``."""
-    if not len(xs):
-        return seed
-    cx, cy = xs.mean(), ys.mean()
-    k = int(np.argmin((xs - cx) ** 2 + (ys - cy) ** 2))
-    c = (int(xs[k]), int(ys[k]))
-    return c if reach[c] else seed
-
-
-def split_balance(owner: np.ndarray, k: int) -> float:
-    """The largest part over the mean part (1.0: perfectly balanced)."""
-    sizes = np.bincount(owner[owner >= 0], minlength=k)
-    return float(sizes.max() / max(sizes.mean(), 1e-9))
-
-
-__all__ = ["geodesic", "split_area", "split_balance"]
+__all__ = ["Piece", "cut_sweep", "geodesic", "owner_by_anchor"]
