@@ -389,6 +389,7 @@ def test_a_fleet_flies_back_from_its_files_with_the_grid_fleets_coverage(tmp_pat
     # Flown together in one Aviary: the grid kept them in different cells, and so does PyFlyt.
     assert len(flown["members"]) == 2 and flown["flown"].startswith("together")
     assert flown["contacts_between_drones"] == 0 and flown["closest_approach_m"] > 0.3
+    assert "closest_to_waiting_m" in flown  # beside it: to a drone still waiting at home
     assert "0 contacts between drones" in " ".join(proc.stdout.split())
     for u in (1, 2):  # each UAV's own flight, beside its credited cells in the grid
         own = json.loads((out / f"uav-{u}" / "flown.json").read_text())

@@ -382,7 +382,9 @@ def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
         console.print(
             f"fleet flown: VCR {f['vcr']:.3f} (grid {f['vcr_grid']:.3f}), energy "
             f"{f['energy_used']:.3f} batteries, {f['contacts_between_drones']} contacts between "
-            f"drones (closest {f['closest_approach_m']} m); wrote {folder / 'flown.json'}"
+            f"drones (closest {f['closest_approach_m']} m in flight, "
+            f"{f['closest_to_waiting_m']} m to a drone waiting at home); wrote "
+            f"{folder / 'flown.json'}"
         )
         return
 

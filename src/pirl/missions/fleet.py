@@ -291,6 +291,7 @@ def fly_fleet(
         "contacts": sum(m["contacts"] for m in flown_members),
         "contacts_between_drones": together["contacts_between_drones"],
         "closest_approach_m": together["closest_approach_m"],
+        "closest_to_waiting_m": together["closest_to_waiting_m"],
         "take_off_s": [round(t, 2) for t in take_off],
         "sim_seconds": together["sim_seconds"],
         "wall_seconds": round(wall, 1),

@@ -254,16 +254,18 @@ class PyFlytFlight:
         ``i`` hovers at its start until ``take_off_s[i]`` simulated seconds have passed; a
         drone that has finished lands where it is (PyFlyt cannot take a body out of the
         world), so teammates pass over it as they would over a drone on the ground. Returns
-        the contacts between drones (pairs that touched, counted when they start touching)
-        and the closest approach of two drones in the air. ``log`` gets the simulated time
-        about every 60 s of it.
+        the contacts between drones (pairs that touched, counted when they start touching),
+        the closest approach of two drones that have taken off and not finished, and apart
+        from it the closest approach of such a drone to one still waiting at its start (held
+        there in the air, where the fleet's separation check has it on the ground). ``log``
+        gets the simulated time about every 60 s of it.
         """
         av, missions = self.aviary, self.missions
         k = len(missions)
         state = ["waiting"] * k
         t, logged = 0.0, 0.0
         touching = np.zeros((k, k), dtype=bool)
-        between, closest = 0, np.inf
+        between, closest, to_waiting = 0, np.inf, np.inf
         while any(s != "done" for s in state):
             for i in range(k):
                 if state[i] == "waiting" and t >= take_off_s[i] - 1e-9:
@@ -280,7 +282,14 @@ class PyFlytFlight:
             if len(up) > 1:
                 at = np.array([self.drones[i].state[3] for i in up])
                 gaps = np.linalg.norm(at[:, None] - at[None, :], axis=-1)
-                closest = min(closest, float(gaps[np.triu_indices(len(up), 1)].min()))
+                waits = np.array([state[i] == "waiting" for i in up])
+                pairs = np.triu(np.ones_like(gaps, dtype=bool), 1)
+                flown = pairs & ~waits[:, None] & ~waits[None, :]
+                one_waits = pairs & (waits[:, None] != waits[None, :])
+                if flown.any():
+                    closest = min(closest, float(gaps[flown].min()))
+                if one_waits.any():
+                    to_waiting = min(to_waiting, float(gaps[one_waits].min()))
             for i in range(k):
                 if state[i] == "flying":
                     pose, over = self._flown(missions[i], i, contacts)
@@ -293,6 +302,7 @@ class PyFlytFlight:
         return {
             "contacts_between_drones": between,
             "closest_approach_m": None if not np.isfinite(closest) else round(closest, 3),
+            "closest_to_waiting_m": None if not np.isfinite(to_waiting) else round(to_waiting, 3),
             "sim_seconds": round(t, 1),
         }
 
