@@ -379,11 +379,15 @@ def fly_and_print(folder: Path, physics: Any, wind: bool = True) -> None:
                 f"grid {m['vcr_grid']:.3f}), energy {m['energy_used']:.3f} of a battery (grid "
                 f"{m['energy_used_grid']:.3f}), end {m['end']}, {m['contacts']} contacts"
             )
+        waiting = (
+            "no drone waited for its take-off"
+            if f["closest_to_waiting_m"] is None
+            else f"{f['closest_to_waiting_m']} m to a drone waiting at home"
+        )
         console.print(
             f"fleet flown: VCR {f['vcr']:.3f} (grid {f['vcr_grid']:.3f}), energy "
             f"{f['energy_used']:.3f} batteries, {f['contacts_between_drones']} contacts between "
-            f"drones (closest {f['closest_approach_m']} m in flight, "
-            f"{f['closest_to_waiting_m']} m to a drone waiting at home); wrote "
+            f"drones (closest {f['closest_approach_m']} m in flight, {waiting}); wrote "
             f"{folder / 'flown.json'}"
         )
         return
