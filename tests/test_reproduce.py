@@ -51,6 +51,9 @@ def test_every_method_is_trained_evaluated_and_reported(reproduced):
     flown = {(line.split("|")[3].strip(), line.split("|")[4].strip())
              for line in fleets.splitlines() if line.startswith("| site:campus")}  # fmt: skip
     assert {k for _, k in flown} == {"1", "2"} and len(flown) == 6
+    cells = [tuple(c.strip() for c in line.split("|")[1:5])
+             for line in fleets.splitlines() if line.startswith("| site:campus")]  # fmt: skip
+    assert len(cells) == len(set(cells))  # one row per world, act, method and fleet size
     assert label in fleets
     assert (report.parent / "fleet_coverage.png").stat().st_size > 10_000
     for name in ("figure.png", "learning_curves.png"):

@@ -37,7 +37,17 @@ def fleet_table(rows: list[dict[str, Any]], names: Mapping[str, str]) -> Table |
     if not fleet:
         return None
     keys = {(r["method"], r["sim"], r["size"], r.get("act", "")) for r in fleet}
-    shown = [r for r in rows if (r["method"], r["sim"], r["size"], r.get("act", "")) in keys]
+    # A reproduction evaluates one UAV twice: with the paper's tables and with the fleets.
+    # One row per fleet size: the fleet evaluation's, which has the fleet's figures.
+    chosen: dict[tuple, dict[str, Any]] = {}
+    for r in rows:
+        key = (r["method"], r["sim"], r["size"], r.get("act", ""))
+        if key not in keys:
+            continue
+        slot = (*key, r["label"], int(r.get("uavs") or 1))
+        if slot not in chosen or _has_fleet_figures(r):
+            chosen[slot] = r
+    shown = list(chosen.values())
     shown.sort(
         key=lambda r: (
             size_key(r["size"]),
@@ -76,6 +86,14 @@ def fleet_table(rows: list[dict[str, Any]], names: Mapping[str, str]) -> Table |
             "cells seen. Near misses: pairs of UAVs in adjacent cells, summed over steps."
         ],
     )
+
+
+def _has_fleet_figures(row: dict[str, Any]) -> bool:
+    """Whether a summary row comes from a fleet evaluation (its overlap is a number)."""
+    try:
+        return not math.isnan(float(row.get("uav_overlap_mean")))
+    except (TypeError, ValueError):  # absent or empty
+        return False
 
 
 def _speed_up(row: Mapping[str, Any]) -> str:
