@@ -182,19 +182,20 @@ def _serpentine(rows: list[list[Cell]], first_backwards: bool = False) -> list[C
 def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
     """One planner per UAV of world ``g`` (reset each with its slot), each given its piece of
     the sweep one UAV would fly (:func:`pirl.world.split.cut_sweep`) and, as its part, the
-    ground its piece sees before any other piece does.
+    ground its piece is the first to see in the sweep's order.
 
     Of the eight sweeps over the grid (lanes along x or y, from either end, the first lane
     either way) the one whose pieces finish earliest is cut. A lane point is kept when it is
     free, reachable from the launch site and sees ground; the transit to a piece is counted
-    in moves round walls from UAV 1's start (its teammates start beside it)."""
+    in moves round walls from the nearest start (the UAVs start side by side)."""
     k = world.uavs
     if k == 1:  # the single UAV's own planner: a fleet of one flies as it does
         return [BoustrophedonPolicy()]
     view = WorldView.of(world, g * k)
     camera, altitude = largest_footprint_camera(view)
     starts = [world.position(s) for s in range(g * k, g * k + k)]
-    launch = geodesic(~view.blocked[:, :, altitude], starts[0][:2])
+    passable = ~view.blocked[:, :, altitude]
+    launch = np.min([geodesic(passable, s[:2]) for s in starts], axis=0)
     sees = useful_map(view, camera, altitude)
     best: tuple[int, list[Cell], list] | None = None
     for axis in (0, 1):
@@ -213,7 +214,7 @@ def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
                 makespan = max(p.moves for p in pieces)
                 if best is None or makespan < best[0]:
                     best = (makespan, points, pieces)
-    if best is None:  # nothing to see from anywhere reachable: every UAV holds still
+    if best is None:  # no lane point both reachable and useful: each UAV plans on its own
         return [BoustrophedonPolicy() for _ in range(k)]
     _, points, pieces = best
     # Each ground cell to the first piece that sees it; cells no lane point sees to the
@@ -240,7 +241,8 @@ def fleet_planners(world: WorldBatch, g: int) -> list[BoustrophedonPolicy]:
         piece_of[u] = int(r)
         cost[u, :] = np.inf
         cost[:, r] = np.inf
-    return [
-        BoustrophedonPolicy(owner == r, lanes[r]) if r >= 0 else BoustrophedonPolicy(owner < -1, [])
-        for r in piece_of  # a UAV without a piece (a sweep too short to share) only helps
+    nothing = np.zeros_like(view.coverable)
+    return [  # a UAV without a piece (a sweep too short to share) only helps
+        BoustrophedonPolicy(owner == r, lanes[r]) if r >= 0 else BoustrophedonPolicy(nothing, [])
+        for r in piece_of
     ]
