@@ -31,8 +31,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from agent_sweep import worlds_of  # noqa: E402
 from pirl.agents.loading import load_policy  # noqa: E402
-from pirl.agents.views import Candidates, ViewsEnv, ViewsPolicy, nearest_view  # noqa: E402
+from pirl.agents.views import ViewsPolicy, nearest_view  # noqa: E402
 from pirl.config.run import RunConfig  # noqa: E402
+from pirl.env.views import Candidates, ViewsEnv  # noqa: E402
 from pirl.evaluate.rollout import run_episode  # noqa: E402
 from pirl.evaluate.scenarios import parse_size, validation_seeds  # noqa: E402
 from pirl.evaluate.summary import interval_estimates  # noqa: E402

@@ -1,23 +1,25 @@
-"""Candidate views: the places offered, the pilot that flies there, the env a chooser trains in."""
+"""Candidate views: the places offered, the pilot that flies there, the envs a chooser trains in."""
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 from pirl.agents import BoustrophedonPolicy
-from pirl.agents.views import (
+from pirl.agents.views import ViewsPolicy, nearest_view
+from pirl.env import VCPPEnv
+from pirl.env.views import (
     K_VIEWS,
     OBS_SIZE,
     VIEW_FEATURES,
     ViewPilot,
     ViewsEnv,
-    ViewsPolicy,
     candidates,
-    nearest_view,
 )
-from pirl.env import VCPPEnv
+from pirl.env.views_sb3 import ViewsVecEnv
 from pirl.evaluate import run_episode
 from pirl.world.metrics import episode_metrics
 from pirl.world.planning import WorldView, bfs_path
@@ -101,7 +103,7 @@ def test_a_choice_earns_the_inner_envs_rewards_of_its_flight():
     done, choices = False, 0
     while not done:
         k = int(rng.choice(np.flatnonzero(env.action_masks())))
-        cell = env._c.cells[k]
+        cell = env.views.candidates.cells[k]
         obs, reward, terminated, truncated, info = env.step(k)
         pilot.aim(cell)
         total, steps = 0.0, 0
@@ -114,3 +116,43 @@ def test_a_choice_earns_the_inner_envs_rewards_of_its_flight():
         choices += 1
     assert choices > 3 and "episode_metrics" in info
     assert info["episode_metrics"] == episode_metrics(twin.world, 0)
+
+
+def test_the_batched_env_plays_each_world_as_the_single_env_and_resumes_exactly():
+    cfg = VCPPEnv(size=(15, 15, 3), wind_prob=0.2, reward="ewri").cfg
+    venv = ViewsVecEnv(3, cfg)
+    venv.seed(20)
+    obs = venv.reset()
+    singles = [ViewsEnv(cfg) for _ in range(3)]
+    expected = np.stack([env.reset(seed=20 + i)[0] for i, env in enumerate(singles)])
+    assert np.array_equal(obs, expected)
+    rng = np.random.default_rng(1)
+
+    def choose(masks):
+        return np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+
+    ends = 0
+    for step in range(60):
+        if step == 30:
+            saved, rng_saved = venv.state_dict(), copy.deepcopy(rng)
+        actions = choose(venv.action_masks())
+        obs, rewards, dones, infos = venv.step(actions)
+        for i, env in enumerate(singles):
+            o, r, terminated, truncated, info = env.step(int(actions[i]))
+            assert rewards[i] == pytest.approx(r)
+            assert dones[i] == (terminated or truncated)
+            if dones[i]:
+                ends += 1
+                assert np.array_equal(infos[i]["terminal_observation"], o)
+                assert infos[i]["episode_metrics"] == info["episode_metrics"]
+                o, _ = env.reset()
+            assert np.array_equal(obs[i], o)
+        if step == 45:
+            tail = (obs.copy(), rewards.copy())
+    assert ends >= 3
+    # Resumed from the state at step 30, the same choices give the same steps 30-45.
+    venv.load_state_dict(saved)
+    rng = rng_saved
+    for _ in range(16):
+        obs, rewards, _, _ = venv.step(choose(venv.action_masks()))
+    assert np.array_equal(obs, tail[0]) and np.array_equal(rewards, tail[1])

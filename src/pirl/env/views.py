@@ -1,0 +1,340 @@
+"""Candidate views: macro actions for a coverage policy that chooses where to look next.
+
+A primitive policy picks one of 12 moves or camera steps at every step, so crossing ground it
+has already seen takes a long run of right choices. A policy over candidate views picks one
+of ``K_VIEWS`` places from which the camera would see ground not yet covered; the grid's
+breadth-first moves carry the UAV there (one env step per cell, every step booked by the
+rules as usual), and then it chooses again. The camera and altitude are the planner's
+(:func:`~pirl.world.planning.largest_footprint_camera`), set at the start of an episode.
+
+The candidates are the nearest useful place in each of eight compass sectors around the
+UAV (by moves at its altitude, the way round obstacles), so the choice is about direction
+and distance, as a sweep's is. Each is described by its offset, its distance in moves, the
+new cells its view would see and the share of the work left that lies in its sector.
+
+:class:`ViewPilot` flies one choice; :class:`ViewsWorld` is one world flown choice by
+choice; :class:`ViewsEnv` is its Gymnasium env and :class:`~pirl.env.views_sb3.ViewsVecEnv`
+the batched one a chooser trains in. :mod:`pirl.agents.views` plays a chooser as a policy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numba
+import numpy as np
+from gymnasium import spaces
+
+from pirl.config.world import VCPPConfig
+from pirl.env.core import EnvCore, require_one_uav
+from pirl.world import dynamics as D
+from pirl.world.metrics import episode_metrics
+from pirl.world.planning import Camera, Cell, WorldView, largest_footprint_camera
+from pirl.world.state import WorldBatch
+
+K_VIEWS = 8
+"""Candidates per choice: one per compass sector."""
+VIEW_FEATURES = 6
+"""Per candidate: present, dx, dy, moves, new cells, work in its sector."""
+COARSE = 4
+"""The global block: a COARSE x COARSE map of the share of each block's work left."""
+GLOBAL_FEATURES = 6 + COARSE * COARSE
+OBS_SIZE = K_VIEWS * VIEW_FEATURES + GLOBAL_FEATURES
+UNREACHED = np.iinfo(np.int32).max
+
+
+@numba.njit(cache=True)
+def _gains(todo, offsets, out):
+    """out[x, y] = how many ``todo`` cells the footprint ``offsets`` sees from (x, y)."""
+    sx, sy = todo.shape
+    for x in range(sx):
+        for y in range(sy):
+            n = 0
+            for k in range(offsets.shape[0]):
+                i, j = x + offsets[k, 0], y + offsets[k, 1]
+                if 0 <= i < sx and 0 <= j < sy and todo[i, j]:
+                    n += 1
+            out[x, y] = n
+
+
+@numba.njit(cache=True)
+def _moves_from(blocked, x0, y0, out):
+    """Breadth-first moves from (x0, y0) over the free cells of one altitude ``blocked``
+    (X, Y); UNREACHED where no way leads."""
+    sx, sy = blocked.shape
+    out[:, :] = UNREACHED
+    queue = np.empty(sx * sy, dtype=np.int64)
+    out[x0, y0] = 0
+    queue[0] = x0 * sy + y0
+    head, tail = 0, 1
+    while head < tail:
+        c = queue[head]
+        head += 1
+        cx, cy = c // sy, c % sy
+        for m in range(4):
+            nx, ny = cx + D.MOVE_DX[m], cy + D.MOVE_DY[m]
+            if 0 <= nx < sx and 0 <= ny < sy and not blocked[nx, ny] and out[nx, ny] == UNREACHED:
+                out[nx, ny] = out[cx, cy] + 1
+                queue[tail] = nx * sy + ny
+                tail += 1
+
+
+@dataclass
+class Candidates:
+    """One choice: up to K_VIEWS places (x, y, altitude) and the observation describing them."""
+
+    cells: list[Cell | None]
+    """Slot k's place, or None where sector k has no useful place."""
+    obs: np.ndarray
+    """(OBS_SIZE,) float32: the candidates' features, then the global block."""
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Which slots hold a place (never all False while :attr:`any`)."""
+        return np.array([c is not None for c in self.cells], dtype=bool)
+
+    @property
+    def any(self) -> bool:
+        return any(c is not None for c in self.cells)
+
+
+def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
+    """The nearest useful place in each compass sector around the UAV, seen with ``camera``
+    from ``altitude`` (ties: the one whose view adds more cells)."""
+    sx, sy, _ = view.cfg.size
+    x0, y0, _ = view.position
+    todo = view.coverable & (view.views == 0)
+    cx, cy = sx // 2, sy // 2
+    offsets = view.footprint((cx, cy, altitude), camera) - np.array([cx, cy])
+    gains = np.zeros((sx, sy), dtype=np.int64)
+    _gains(todo, offsets, gains)
+    moves = np.empty((sx, sy), dtype=np.int64)
+    _moves_from(view.blocked[:, :, altitude], x0, y0, moves)
+    xs, ys = np.nonzero((gains > 0) & (moves < UNREACHED) & (moves > 0))
+    scale = float(max(sx, sy))
+    left = max(1, int(todo.sum()))
+    obs = np.zeros(OBS_SIZE, dtype=np.float32)
+    cells: list[Cell | None] = [None] * K_VIEWS
+    if len(xs):
+        dx, dy = xs - x0, ys - y0
+        sector = ((np.arctan2(dy, dx) + np.pi) / (2 * np.pi) * K_VIEWS).astype(int) % K_VIEWS
+        tx, ty = np.nonzero(todo)
+        t_sector = ((np.arctan2(ty - y0, tx - x0) + np.pi) / (2 * np.pi) * K_VIEWS).astype(int)
+        work = np.bincount(t_sector % K_VIEWS, minlength=K_VIEWS)
+        dist, gain = moves[xs, ys], gains[xs, ys]
+        order = np.lexsort((-gain, dist, sector))  # per sector: nearest, then larger view
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = sector[order][1:] != sector[order][:-1]
+        fp = max(1, len(offsets))
+        for i in order[first]:
+            k = int(sector[i])
+            cells[k] = (int(xs[i]), int(ys[i]), int(altitude))
+            obs[k * VIEW_FEATURES : (k + 1) * VIEW_FEATURES] = (
+                1.0, dx[i] / scale, dy[i] / scale, dist[i] / (sx + sy), gain[i] / fp,
+                work[k] / left,
+            )  # fmt: skip
+    coverable, n_todo = max(1, int(view.coverable.sum())), int(todo.sum())
+    g = K_VIEWS * VIEW_FEATURES
+    obs[g : g + 6] = (
+        x0 / max(1, sx - 1), y0 / max(1, sy - 1), view.energy / view.cfg.capacity,
+        1.0 - n_todo / coverable, n_todo / (sx * sy), altitude / max(1, view.cfg.size[2] - 1),
+    )  # fmt: skip
+    bx, by = -(-sx // COARSE), -(-sy // COARSE)
+    for i in range(COARSE):
+        for j in range(COARSE):
+            block = view.coverable[i * bx : (i + 1) * bx, j * by : (j + 1) * by]
+            if block.any():
+                done = todo[i * bx : (i + 1) * bx, j * by : (j + 1) * by].sum()
+                obs[g + 6 + i * COARSE + j] = done / block.sum()
+    return Candidates(cells, obs)
+
+
+class ViewPilot:
+    """Flies one UAV to a chosen place with the episode's camera: camera steps first, then
+    the altitude, then one move at a time down the moves-to-target map (recomputed only when a
+    new place is chosen; a gust that pushes the UAV aside is followed from where it lands)."""
+
+    def __init__(self, world: WorldBatch, e: int) -> None:
+        self.world, self.e = world, e
+        view = WorldView.of(world, e)
+        self.camera, self.altitude = largest_footprint_camera(view)
+        self.target: Cell | None = None
+        self._moves = np.empty(world.cfg.size[:2], dtype=np.int64)
+
+    def aim(self, cell: Cell) -> None:
+        """Fly to ``cell`` from now on."""
+        self.target = cell
+        blocked = self.world.blocked[self.world.world_of(self.e), :, :, self.altitude]
+        _moves_from(blocked, cell[0], cell[1], self._moves)
+
+    def arrived(self) -> bool:
+        return self.target is None or self.world.position(self.e) == self.target
+
+    def action(self) -> int | None:
+        """The next primitive action, or None once at the target with the camera set (or when
+        no way leads there now)."""
+        tilt, pan, zoom10 = self.world.camera_setting(self.e)
+        want_tilt, want_pan, want_zoom = self.camera
+        if tilt != want_tilt:
+            return D.TILT_PLUS if tilt < want_tilt else D.TILT_MINUS
+        if pan != want_pan:
+            return D.PAN_PLUS if pan < want_pan else D.PAN_MINUS
+        if zoom10 != want_zoom:
+            return D.ZOOM_PLUS if zoom10 < want_zoom else D.ZOOM_MINUS
+        x, y, z = self.world.position(self.e)
+        if z != self.altitude:
+            return D.Z_PLUS if z < self.altitude else D.Z_MINUS
+        if self.arrived():
+            return None
+        here = self._moves[x, y]
+        for a in range(4):
+            nx, ny = x + D.MOVE_DX[a], y + D.MOVE_DY[a]
+            sx, sy = self._moves.shape
+            if 0 <= nx < sx and 0 <= ny < sy and self._moves[nx, ny] < here:
+                return a
+        return None
+
+
+@dataclass
+class Flight:
+    """What one choice did: the inner env's rewards and reward terms summed over its
+    primitive steps, how many there were, and how the episode stands after it."""
+
+    reward: float
+    terms: np.ndarray
+    steps: int
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+
+
+class ViewsWorld:
+    """One world flown choice by choice (a one-world :class:`~pirl.env.core.EnvCore`, the
+    rules of every env): its pilot and its current candidates. :class:`ViewsEnv` and
+    :class:`ViewsVecEnv` are this, one world or many."""
+
+    def __init__(self, cfg: VCPPConfig) -> None:
+        require_one_uav(cfg, "candidate views")
+        self.core = EnvCore(cfg, 1)
+        # A choice's flight ends at its place; this bounds one that gusts keep from it.
+        self.limit = 4 * sum(cfg.size)
+        self.pilot: ViewPilot | None = None
+        self.candidates: Candidates | None = None
+
+    @property
+    def world(self) -> WorldBatch:
+        return self.core.world
+
+    def reset(self, rng: np.random.Generator, scenario: Any = None) -> dict[str, Any]:
+        """A new episode drawn from ``rng`` (or ``scenario``); its first info."""
+        self.core.reset_world(0, rng, scenario)
+        self.pilot = ViewPilot(self.world, 0)
+        self._offer()
+        return self.core.infos()[0]
+
+    def _offer(self) -> None:
+        view = WorldView.of(self.world, 0)
+        self.candidates = candidates(view, self.pilot.camera, self.pilot.altitude)
+
+    @property
+    def obs(self) -> np.ndarray:
+        return self.candidates.obs.copy()
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.candidates.mask
+
+    def fly(self, k: int) -> Flight:
+        """Fly to candidate ``k`` (an absent one: only the camera and altitude are set)."""
+        cell = self.candidates.cells[int(k)]
+        if cell is not None:
+            self.pilot.aim(cell)
+        core = self.core
+        reward, terms, steps = 0.0, np.zeros(core.world.terms.shape[1]), 0
+        terminated = truncated = False
+        while steps < self.limit:
+            a = self.pilot.action()
+            if a is None:
+                break
+            core.step(np.array([a], dtype=np.int64))
+            reward += float(core.rewards[0])
+            terms += core.world.terms[0]
+            steps += 1
+            terminated, truncated = bool(core.terminated[0]), bool(core.truncated[0])
+            if terminated or truncated:
+                break
+        info = core.infos()[0]
+        self._offer()
+        if not (terminated or truncated) and not self.candidates.any:
+            truncated = True  # nothing useful is reachable: the episode ends here
+            info["episode_metrics"] = episode_metrics(self.world, 0)
+        return Flight(reward, terms, steps, terminated, truncated, info)
+
+    def state_dict(self) -> dict[str, Any]:
+        """What continues the episode exactly: the core, the pilot's camera, altitude and
+        place (its way there and the candidates follow from the world)."""
+        pilot = self.pilot
+        return {
+            "core": self.core.state_dict(),
+            "pilot": (pilot.camera, pilot.altitude, pilot.target),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.core.load_state_dict(state["core"])
+        self.pilot = ViewPilot(self.world, 0)
+        camera, altitude, target = state["pilot"]
+        self.pilot.camera, self.pilot.altitude = tuple(camera), int(altitude)
+        if target is not None:
+            self.pilot.aim(tuple(target))
+        self._offer()
+
+
+class ViewsEnv(gym.Env):
+    """Choosing candidate views, one choice per step (Gymnasium API).
+
+    ## Description
+    The VCPP task (:class:`~pirl.env.vcpp_env.VCPPEnv`, same settings) played by choosing
+    where to look next: each step flies the UAV to one of ``K_VIEWS`` candidate places with
+    the planner's camera, one primitive env step per cell.
+
+    ## Action Space
+    ``Discrete(K_VIEWS)``: fly to candidate k; ``action_masks()`` gives the present ones.
+
+    ## Observation Space
+    ``Box(-1, 1, (OBS_SIZE,), float32)``: per candidate (present, dx, dy, moves, new cells,
+    work in its sector), then position, battery, coverage, work left, altitude and a
+    ``COARSE x COARSE`` map of the work left.
+
+    ## Rewards
+    The inner env's reward, summed over the primitive steps of the flight; ``info`` carries
+    ``primitive_steps``.
+
+    ## Episode End
+    When the inner episode ends, or (truncated) when no useful place is reachable.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, cfg: VCPPConfig) -> None:
+        self.views = ViewsWorld(cfg)
+        self.action_space = spaces.Discrete(K_VIEWS)
+        self.observation_space = spaces.Box(-1.0, 1.0, (OBS_SIZE,), np.float32)
+
+    @property
+    def world(self) -> WorldBatch:
+        return self.views.world
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        info = self.views.reset(self.np_random, (options or {}).get("scenario"))
+        return self.views.obs, info
+
+    def action_masks(self) -> np.ndarray:
+        return self.views.mask.copy()
+
+    def step(self, action: int):
+        f = self.views.fly(int(action))
+        info = {**f.info, "primitive_steps": f.steps}
+        return self.views.obs, f.reward, f.terminated, f.truncated, info
