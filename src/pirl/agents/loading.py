@@ -14,6 +14,7 @@ import numpy as np
 from pirl.agents.methods import (
     BUILTIN,
     IL,
+    METHODS,
     PPO_METHODS,
     TRAIN_IMITATION,
     label,
@@ -22,6 +23,7 @@ from pirl.agents.methods import (
 )
 from pirl.agents.policy import Policy
 from pirl.agents.run_folder import RETRAIN, RunFolder, short_error
+from pirl.agents.views import ViewsPolicy
 from pirl.config.choices import Act
 from pirl.config.errors import ConfigError, UserError
 
@@ -158,6 +160,32 @@ class PPOPolicy(LearnedPolicy):
             return torch.softmax(logits, dim=-1).cpu().numpy()
 
 
+class LearnedViewsPolicy(ViewsPolicy):
+    """A trained chooser (a ``ppo-views`` run's network, ``net``) played as a policy: its most
+    likely candidate (greedy) or one drawn from its masked probabilities, seeded per scenario
+    (stochastic), as every learned policy acts."""
+
+    def __init__(self, net: LearnedPolicy) -> None:
+        super().__init__(self._choose_with_net, net.label)
+        self.net, self.name = net, net.name
+        self._rng = act_rng(None)
+
+    @property
+    def act_mode(self) -> str:
+        return self.net.act_mode
+
+    def set_act(self, mode: str) -> LearnedViewsPolicy:
+        self.net.set_act(mode)
+        return self
+
+    def reset(self, world: Any, index: int = 0, seed: int | None = None) -> None:
+        super().reset(world, index, seed)
+        self._rng = act_rng(seed)
+
+    def _choose_with_net(self, c: Any) -> int:
+        return int(self.net.act_batch(c.obs[None], [self._rng], c.mask[None])[0])
+
+
 class TabNetPolicy(LearnedPolicy):
     """The imitation-learning TabNet classifier (greedy: its most likely action)."""
 
@@ -251,8 +279,11 @@ def load_policy(
         raise ConfigError(f"{source!r} is neither a run folder nor a method ({', '.join(BUILTIN)})")
     folder = RunFolder(run)
     name, model, masked = folder.method, folder.model_file(), folder.masked
-    if trained_method(name, f"run {run}").training == TRAIN_IMITATION:
+    entry = trained_method(name, f"run {run}")
+    if entry.training == TRAIN_IMITATION:
         return TabNetPolicy(model, name, masked).set_act(act)
+    if entry.views:
+        return LearnedViewsPolicy(PPOPolicy(model, name, device, masked).set_act(act))
     return PPOPolicy(model, name, device, masked).set_act(act)
 
 
@@ -375,14 +406,23 @@ def load_sb3(path: Path, algo: Any, device: str = "cpu") -> Any:
     path = Path(path)
     data = sb3_entries(path)
     try:
-        cfg = RunFolder(path.parent).config
+        folder = RunFolder(path.parent)
+        cfg = folder.config
+        views = METHODS[folder.method].views if folder.method in METHODS else False
     except ConfigError as exc:
         raise UserError(f"{path} cannot be loaded: {exc}; {RETRAIN}") from None
+    if views:
+        from pirl.env.views import views_spaces
+
+        obs_space, action_space = views_spaces()
+    else:
+        obs_space = gym.spaces.Box(0.0, 1.0, (obs_size_for(cfg.env),), dtype=np.float32)
+        action_space = gym.spaces.Discrete(N_ACTIONS)
     policy = algo.policy_aliases["MlpPolicy"]
     rebuilt: dict[str, Any] = {
         "policy_class": policy,
-        "observation_space": gym.spaces.Box(0.0, 1.0, (obs_size_for(cfg.env),), dtype=np.float32),
-        "action_space": gym.spaces.Discrete(N_ACTIONS),
+        "observation_space": obs_space,
+        "action_space": action_space,
         "learning_rate": learning_rate_of(cfg.ppo),
         "lr_schedule": learning_rate_of(cfg.ppo),
         "clip_range": cfg.ppo.clip_range,

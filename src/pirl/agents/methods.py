@@ -78,6 +78,9 @@ class Method:
     short: str = ""
     """What the HTML report's tables, findings and figures call it (the label when empty);
     the page's legend gives the full label once."""
+    views: bool = False
+    """PPO: it chooses among candidate views (macro actions, :mod:`pirl.env.views`), not
+    among the 12 primitive actions; its ``train.total_steps`` counts choices."""
 
     @property
     def plays_alone(self) -> bool:
@@ -138,6 +141,15 @@ METHODS: dict[str, Method] = {
             options=("expert",),
         ),  # fmt: skip
         Method("pirl", "PIRL", advised=True, options=("advisor", "student")),
+        Method(
+            "ppo-views",
+            "PPO over candidate views (macro actions)",
+            short="PPO-views",
+            reward="static",
+            paper=False,
+            fleet=False,
+            views=True,
+        ),
         Method(
             "boustrophedon",
             "boustrophedon (planner)",

@@ -100,10 +100,20 @@ class EnvStack:
     pare: Any | None
 
 
-def build_env_stack(cfg: RunConfig, seed: int, advice: Any | None, source: str = "") -> EnvStack:
+def build_env_stack(
+    cfg: RunConfig, seed: int, advice: Any | None, source: str = "", views: bool = False
+) -> EnvStack:
     """make_vec_env on the resolved config's training env -> (PARE when there is ``advice``,
-    a :class:`~pirl.pare.bundle.AdviceBundle`) -> VecMonitor."""
-    if cfg.train.uavs != (1,):
+    a :class:`~pirl.pare.bundle.AdviceBundle`) -> VecMonitor. ``views``: the candidate views'
+    batch (:class:`~pirl.env.views_sb3.ViewsVecEnv`) instead, one choice a step."""
+    if views:
+        from pirl.env.views_sb3 import ViewsVecEnv
+
+        if cfg.train.uavs != (1,):
+            raise ConfigError("train.uavs: candidate views fly one UAV (give [1])")
+        venv = ViewsVecEnv(cfg.ppo.n_envs, training_env(cfg))
+        venv.seed(train_seed_base(seed))
+    elif cfg.train.uavs != (1,):
         from pirl.env.fleet import MixedFleetVecEnv
 
         venv = MixedFleetVecEnv(
@@ -358,7 +368,7 @@ def train(
 
     # 3. the env stack and the model (restored from the checkpoint when resuming).
     torch.set_num_threads(cfg.ppo.torch_threads)
-    stack = build_env_stack(cfg, seed, advice, source=str(run.path.resolve()))
+    stack = build_env_stack(cfg, seed, advice, str(run.path.resolve()), entry.views)
     model = build_ppo(stack.env, cfg, seed, run.tensorboard)
     csv_rows = 0
     if found is not None:

@@ -45,6 +45,11 @@ OBS_SIZE = K_VIEWS * VIEW_FEATURES + GLOBAL_FEATURES
 UNREACHED = np.iinfo(np.int32).max
 
 
+def views_spaces() -> tuple[spaces.Box, spaces.Discrete]:
+    """The observation and action spaces of a chooser of candidate views."""
+    return spaces.Box(-1.0, 1.0, (OBS_SIZE,), np.float32), spaces.Discrete(K_VIEWS)
+
+
 @numba.njit(cache=True)
 def _gains(todo, offsets, out):
     """out[x, y] = how many ``todo`` cells the footprint ``offsets`` sees from (x, y)."""
@@ -319,8 +324,7 @@ class ViewsEnv(gym.Env):
 
     def __init__(self, cfg: VCPPConfig) -> None:
         self.views = ViewsWorld(cfg)
-        self.action_space = spaces.Discrete(K_VIEWS)
-        self.observation_space = spaces.Box(-1.0, 1.0, (OBS_SIZE,), np.float32)
+        self.observation_space, self.action_space = views_spaces()
 
     @property
     def world(self) -> WorldBatch:

@@ -7,13 +7,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from pirl.config.world import VCPPConfig
 from pirl.env.sb3_vec import SharedVecEnvPlumbing
-from pirl.env.views import K_VIEWS, OBS_SIZE, ViewsWorld
+from pirl.env.views import OBS_SIZE, ViewsWorld, views_spaces
 
 
 @dataclass
@@ -33,11 +32,7 @@ class ViewsVecEnv(SharedVecEnvPlumbing, VecEnv):
         self.cfg = cfg
         self.worlds = [ViewsWorld(cfg) for _ in range(num_envs)]
         self.render_mode = None
-        super().__init__(
-            num_envs,
-            spaces.Box(-1.0, 1.0, (OBS_SIZE,), np.float32),
-            spaces.Discrete(K_VIEWS),
-        )
+        super().__init__(num_envs, *views_spaces())
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._actions: np.ndarray | None = None
         self.step_snapshot: ViewsStep | None = None

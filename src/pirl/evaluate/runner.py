@@ -184,6 +184,7 @@ def run_chunk(
     ``act``; one record per episode. ``uavs`` plays a fleet of that many UAVs
     (:func:`~pirl.evaluate.fleet.run_fleet_episode`); None the single UAV."""
     from pirl import _quiet
+    from pirl.agents.loading import LearnedPolicy
     from pirl.env.vcpp_env import VCPPEnv
     from pirl.evaluate.rollout import run_batch, run_episode
 
@@ -220,8 +221,8 @@ def run_chunk(
         return fleet_records(env_cfg.replace(uavs=uavs), policy, seeds, base, ids)
     records = []
     batch: list[dict[str, float]] = []
-    if sim == "grid" and act != FIXED and batched:
-        batch = run_batch(env_cfg, policy, seeds)
+    if sim == "grid" and act != FIXED and batched and isinstance(policy, LearnedPolicy):
+        batch = run_batch(env_cfg, policy, seeds)  # (a chooser of views plays episode by episode)
     env = VCPPEnv(env_cfg) if sim == "grid" and not batch else None
     for k, seed in enumerate(seeds):
         calls_before = getattr(policy, "calls", 0)
