@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import copy
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from gymnasium.utils.env_checker import check_env
+from sb3_contrib import MaskablePPO
 
 from pirl.agents import BoustrophedonPolicy
-from pirl.agents.views import ViewsPolicy, nearest_view
+from pirl.agents.loading import load_policy
+from pirl.agents.train import train
+from pirl.agents.views import ViewsPolicy
+from pirl.config.run import RunConfig
 from pirl.env import VCPPEnv
 from pirl.env.views import (
     K_VIEWS,
@@ -18,11 +25,18 @@ from pirl.env.views import (
     ViewPilot,
     ViewsEnv,
     candidates,
+    nearest_view,
 )
 from pirl.env.views_sb3 import ViewsVecEnv
 from pirl.evaluate import run_episode
 from pirl.world.metrics import episode_metrics
 from pirl.world.planning import WorldView, bfs_path
+
+TEST_CFG = Path(__file__).resolve().parents[1] / "configs" / "test.yaml"
+
+
+def _weights(path: Path) -> dict:
+    return MaskablePPO.load(path, device="cpu").policy.state_dict()
 
 
 def _sector(dx: int, dy: int) -> int:
@@ -156,3 +170,39 @@ def test_the_batched_env_plays_each_world_as_the_single_env_and_resumes_exactly(
     for _ in range(16):
         obs, rewards, _, _ = venv.step(choose(venv.action_masks()))
     assert np.array_equal(obs, tail[0]) and np.array_equal(rewards, tail[1])
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_the_policy_flies_the_choices_the_env_trains_on(seed):
+    # The same chooser in ViewsEnv (training) and as a ViewsPolicy (evaluation, missions)
+    # flies the same primitive steps: the same episode, gusts included.
+    cfg = VCPPEnv(size=(15, 15, 3), wind_prob=0.2).cfg
+    env = ViewsEnv(cfg)
+    env.reset(seed=seed)
+    done = False
+    while not done:
+        _, _, terminated, truncated, info = env.step(nearest_view(env.views.candidates))
+        done = terminated or truncated
+    assert terminated  # every cell seen: the policy's episode ends there too
+    played = run_episode(VCPPEnv(cfg), ViewsPolicy(nearest_view), seed).metrics
+    assert {k: played[k] for k in info["episode_metrics"]} == info["episode_metrics"]
+
+
+def test_ppo_views_trains_resumes_exactly_and_plays_in_both_act_modes(tmp_path):
+    cfg = RunConfig.from_yaml(TEST_CFG)
+    whole = cfg.with_overrides(train={"total_steps": 256})
+    straight = train("ppo-views", whole, tmp_path / "a", show_progress=False)
+    half = cfg.with_overrides(train={"total_steps": 128})
+    train("ppo-views", half, tmp_path / "b", show_progress=False)
+    resumed = train("ppo-views", whole, tmp_path / "b", resume=True, show_progress=False)
+    a, b = _weights(straight), _weights(resumed)
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    episodes = [(tmp_path / r / "episodes.csv").read_text() for r in "ab"]
+    assert episodes[0] == episodes[1] and len(episodes[0].splitlines()) > 2
+    meta = json.loads((tmp_path / "a" / "meta.json").read_text())
+    assert meta["label"] == "PPO over candidate views (macro actions)"
+    own = RunConfig.from_yaml(tmp_path / "a" / "config.yaml").env
+    env = VCPPEnv(own.replace(size=(20, 20, 3)))
+    for act in ("greedy", "stochastic"):
+        runs = [run_episode(env, load_policy(tmp_path / "a", act=act), 3).metrics for _ in range(2)]
+        assert runs[0] == runs[1] and runs[0]["vcr"] > 0.5

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from pirl.agents.policy import Policy, hold_action
-from pirl.env.views import K_VIEWS, VIEW_FEATURES, Candidates, ViewPilot, candidates
+from pirl.env.views import Candidates, ViewPilot, candidates, flight_limit, nearest_view
 from pirl.world.planning import WorldView
 from pirl.world.state import WorldBatch
 
@@ -16,17 +16,11 @@ Chooser = Callable[[Candidates], int]
 """Picks a slot of a :class:`Candidates` whose place is present."""
 
 
-def nearest_view(c: Candidates) -> int:
-    """The rule a learned chooser is measured against: the nearest candidate (then the one
-    whose view adds more cells)."""
-    feats = c.obs[: K_VIEWS * VIEW_FEATURES].reshape(K_VIEWS, VIEW_FEATURES)
-    keys = [(f[3], -f[4]) if f[0] else (np.inf, 0.0) for f in feats]
-    return int(min(range(K_VIEWS), key=lambda k: keys[k]))
-
-
 class ViewsPolicy(Policy):
-    """A chooser of candidate views played step by step: it chooses a place whenever the
-    last one is reached (or no longer useful), and the pilot's moves fill the steps between."""
+    """A chooser of candidate views played step by step, as :class:`~pirl.env.views.ViewsEnv`
+    plays it: a choice among the candidates of the moment, the pilot's steps to its place
+    (at most :func:`~pirl.env.views.flight_limit`), then the next choice. Where no useful
+    place is reachable it holds still (the env's stall guard, when on, leads it on)."""
 
     name = "views"
     label = "candidate views"
@@ -39,23 +33,21 @@ class ViewsPolicy(Policy):
     def reset(self, world: WorldBatch, index: int = 0, seed: int | None = None) -> None:
         self.world, self.e = world, index
         self.pilot = ViewPilot(world, index)
-        self.choices = 0
+        self.limit = flight_limit(world.cfg)
+        self.choices, self.flown, self.choosing = 0, 0, True
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         for _ in range(2):
-            action = self.pilot.action()
+            if self.choosing:
+                view = WorldView.of(self.world, self.e)
+                c = candidates(view, self.pilot.camera, self.pilot.altitude)
+                if not c.any:
+                    break
+                self.pilot.aim(c.place(self.chooser(c)))
+                self.choices, self.flown, self.choosing = self.choices + 1, 0, False
+            action = self.pilot.action() if self.flown < self.limit else None
             if action is not None:
+                self.flown += 1
                 return action
-            if not self._choose():
-                break
+            self.choosing = True
         return hold_action(self.world.camera_setting(self.e))
-
-    def _choose(self) -> bool:
-        view = WorldView.of(self.world, self.e)
-        c = candidates(view, self.pilot.camera, self.pilot.altitude)
-        if not c.any:
-            return False
-        k = self.chooser(c)
-        self.pilot.aim(c.cells[k])
-        self.choices += 1
-        return True

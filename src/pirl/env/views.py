@@ -104,6 +104,13 @@ class Candidates:
     def any(self) -> bool:
         return any(c is not None for c in self.cells)
 
+    def place(self, k: int) -> Cell | None:
+        """The place chosen by slot ``k``: an absent one (which a masked chooser never picks)
+        stands for the nearest present one."""
+        if self.cells[int(k)] is None and self.any:
+            k = nearest_view(self)
+        return self.cells[int(k)]
+
 
 def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     """The nearest useful place in each compass sector around the UAV, seen with ``camera``
@@ -202,6 +209,20 @@ class ViewPilot:
         return None
 
 
+def nearest_view(c: Candidates) -> int:
+    """The rule a learned chooser is measured against: the nearest candidate (then the one
+    whose view adds more cells)."""
+    feats = c.obs[: K_VIEWS * VIEW_FEATURES].reshape(K_VIEWS, VIEW_FEATURES)
+    keys = [(f[3], -f[4]) if f[0] else (np.inf, 0.0) for f in feats]
+    return int(min(range(K_VIEWS), key=lambda k: keys[k]))
+
+
+def flight_limit(cfg: VCPPConfig) -> int:
+    """Primitive steps after which a choice's flight ends short of its place (gusts may keep
+    the UAV from it): four crossings of the grid."""
+    return 4 * sum(cfg.size)
+
+
 @dataclass
 class Flight:
     """What one choice did: the inner env's rewards and reward terms summed over its
@@ -223,8 +244,7 @@ class ViewsWorld:
     def __init__(self, cfg: VCPPConfig) -> None:
         require_one_uav(cfg, "candidate views")
         self.core = EnvCore(cfg, 1)
-        # A choice's flight ends at its place; this bounds one that gusts keep from it.
-        self.limit = 4 * sum(cfg.size)
+        self.limit = flight_limit(cfg)
         self.pilot: ViewPilot | None = None
         self.candidates: Candidates | None = None
 
@@ -252,8 +272,9 @@ class ViewsWorld:
         return self.candidates.mask
 
     def fly(self, k: int) -> Flight:
-        """Fly to candidate ``k`` (an absent one: only the camera and altitude are set)."""
-        cell = self.candidates.cells[int(k)]
+        """Fly to candidate ``k`` (an absent one, which a masked chooser never picks: the
+        nearest present one)."""
+        cell = self.candidates.place(k)
         if cell is not None:
             self.pilot.aim(cell)
         core = self.core
