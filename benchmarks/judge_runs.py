@@ -59,7 +59,7 @@ def main() -> None:
             for act in ("stochastic", "greedy"):
                 vcr, ratio, guard, to_99 = [], [], [], []
                 for run in runs:
-                    metrics = run_batch(cfg, load_policy(run, act=act), seeds)
+                    metrics = play(cfg, load_policy(run, act=act), seeds)
                     vcr.append(np.mean([m["vcr"] for m in metrics]))
                     steps = [m["steps"] / p for m, p in zip(metrics, p_steps, strict=True)]
                     ratio.append(np.mean(steps))
@@ -79,6 +79,19 @@ def main() -> None:
                     f"guarded {np.mean(guard):.3f}  seeds {' '.join(f'{v:.3f}' for v in vcr)}",
                     flush=True,
                 )
+
+
+def play(env_cfg, policy, seeds: list[int]) -> list[dict]:
+    """A learned policy's episode metrics on each scenario: one batch of every scenario for a
+    policy over the 12 actions, episode by episode for a chooser of candidate views."""
+    from pirl.agents.loading import LearnedPolicy
+    from pirl.env.vcpp_env import VCPPEnv
+    from pirl.evaluate.rollout import run_episode
+
+    if isinstance(policy, LearnedPolicy):
+        return run_batch(env_cfg, policy, seeds)
+    env = VCPPEnv(env_cfg)
+    return [run_episode(env, policy, s).metrics for s in seeds]
 
 
 def planner_metrics(env_cfg, seeds: list[int]) -> list[dict]:

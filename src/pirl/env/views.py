@@ -94,6 +94,10 @@ class Candidates:
     """Slot k's place, or None where sector k has no useful place."""
     obs: np.ndarray
     """(OBS_SIZE,) float32: the candidates' features, then the global block."""
+    moves: list[int]
+    """Slot k's distance in moves (0 where absent)."""
+    gains: list[int]
+    """The new cells slot k's view would see (0 where absent)."""
 
     @property
     def mask(self) -> np.ndarray:
@@ -125,10 +129,13 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     moves = np.empty((sx, sy), dtype=np.int64)
     _moves_from(view.blocked[:, :, altitude], x0, y0, moves)
     xs, ys = np.nonzero((gains > 0) & (moves < UNREACHED) & (moves > 0))
-    scale = float(max(sx, sy))
+    # Distances in footprint widths, squashed: the same numbers on a 15x15 training world
+    # and on a 256x256 site, so what the chooser learned near by carries to any size.
+    scale = 4.0 * max(1.0, float(np.sqrt(len(offsets))))
     left = max(1, int(todo.sum()))
     obs = np.zeros(OBS_SIZE, dtype=np.float32)
     cells: list[Cell | None] = [None] * K_VIEWS
+    far, new = [0] * K_VIEWS, [0] * K_VIEWS
     if len(xs):
         dx, dy = xs - x0, ys - y0
         sector = ((np.arctan2(dy, dx) + np.pi) / (2 * np.pi) * K_VIEWS).astype(int) % K_VIEWS
@@ -143,8 +150,10 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
         for i in order[first]:
             k = int(sector[i])
             cells[k] = (int(xs[i]), int(ys[i]), int(altitude))
+            far[k], new[k] = int(dist[i]), int(gain[i])
             obs[k * VIEW_FEATURES : (k + 1) * VIEW_FEATURES] = (
-                1.0, dx[i] / scale, dy[i] / scale, dist[i] / (sx + sy), gain[i] / fp,
+                1.0, np.tanh(dx[i] / scale), np.tanh(dy[i] / scale), np.tanh(dist[i] / scale),
+                gain[i] / fp,
                 work[k] / left,
             )  # fmt: skip
     coverable, n_todo = max(1, int(view.coverable.sum())), int(todo.sum())
@@ -160,7 +169,7 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
             if block.any():
                 done = todo[i * bx : (i + 1) * bx, j * by : (j + 1) * by].sum()
                 obs[g + 6 + i * COARSE + j] = done / block.sum()
-    return Candidates(cells, obs)
+    return Candidates(cells, obs, far, new)
 
 
 class ViewPilot:
@@ -212,9 +221,8 @@ class ViewPilot:
 def nearest_view(c: Candidates) -> int:
     """The rule a learned chooser is measured against: the nearest candidate (then the one
     whose view adds more cells)."""
-    feats = c.obs[: K_VIEWS * VIEW_FEATURES].reshape(K_VIEWS, VIEW_FEATURES)
-    keys = [(f[3], -f[4]) if f[0] else (np.inf, 0.0) for f in feats]
-    return int(min(range(K_VIEWS), key=lambda k: keys[k]))
+    present = [k for k in range(K_VIEWS) if c.cells[k] is not None]
+    return min(present, key=lambda k: (c.moves[k], -c.gains[k]), default=0)
 
 
 def flight_limit(cfg: VCPPConfig) -> int:
