@@ -442,6 +442,7 @@ def _run_job(
 # second are per advisor: its entry in pirl.advice.registry holds them.
 RATES: dict[str, Any] = {
     "ppo_steps_per_s": 5000.0,
+    "views_choices_per_s": 1700.0,  # ppo-views: a choice flies several steps, offers 8 places
     "il_s": 60.0,
     "eval_eps_per_s": {30: 3.0},
     "physics_s_per_episode": 30.0,
@@ -477,6 +478,8 @@ def _run_seconds(cfg: RunConfig, run: PlannedRun) -> float:
     if entry.expert:
         return RATES["il_s"]
     steps = method_steps(cfg, run.method)
+    if entry.views:
+        return steps / RATES["views_choices_per_s"]
     if not entry.advised:
         return steps / RATES["ppo_steps_per_s"]
     pare = cfg.with_variant(dict(run.pare)).pare
