@@ -16,6 +16,7 @@ from pirl.agents import BoustrophedonPolicy
 from pirl.agents.loading import load_policy
 from pirl.agents.train import train
 from pirl.agents.views import ViewsPolicy
+from pirl.config.errors import ConfigError
 from pirl.config.run import RunConfig
 from pirl.env import VCPPEnv
 from pirl.env.views import (
@@ -206,3 +207,10 @@ def test_ppo_views_trains_resumes_exactly_and_plays_in_both_act_modes(tmp_path):
     for act in ("greedy", "stochastic"):
         runs = [run_episode(env, load_policy(tmp_path / "a", act=act), 3).metrics for _ in range(2)]
         assert runs[0] == runs[1] and runs[0]["vcr"] > 0.5
+
+
+def test_a_fleet_curriculum_is_refused_before_any_folder(tmp_path):
+    cfg = RunConfig.from_yaml(TEST_CFG).with_overrides(train={"uavs": [1, 2]})
+    with pytest.raises(ConfigError, match=r"train.uavs=\[1, 2\]: --method ppo-views chooses"):
+        train("ppo-views", cfg, tmp_path / "run", show_progress=False)
+    assert not (tmp_path / "run").exists()

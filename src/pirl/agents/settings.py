@@ -121,8 +121,15 @@ def ppo_method(name: str) -> Method:
 
 def resolved_config(method: str, cfg: RunConfig) -> RunConfig:
     """``cfg`` with the env the method trains and is judged on (its reward weights, the LLM
-    weight for an advised method): what config.yaml records and evaluations rebuild."""
-    return replace(cfg, env=ppo_method(method).trains_on(cfg.env))
+    weight for an advised method): what config.yaml records and evaluations rebuild. A
+    chooser of candidate views trains on one UAV (fleets refused in one line)."""
+    entry = ppo_method(method)
+    if entry.views and tuple(cfg.train.uavs) != (1,):
+        raise ConfigError(
+            f"train.uavs={list(cfg.train.uavs)}: --method {method} chooses views for one UAV; "
+            "train it with train.uavs [1]"
+        )
+    return replace(cfg, env=entry.trains_on(cfg.env))
 
 
 # Settings a resumed run may change: how long it runs, how often it checkpoints and logs, what

@@ -109,8 +109,6 @@ def build_env_stack(
     if views:
         from pirl.env.views_sb3 import ViewsVecEnv
 
-        if cfg.train.uavs != (1,):
-            raise ConfigError("train.uavs: candidate views fly one UAV (give [1])")
         venv = ViewsVecEnv(cfg.ppo.n_envs, training_env(cfg))
         venv.seed(train_seed_base(seed))
     elif cfg.train.uavs != (1,):
