@@ -118,7 +118,10 @@ class Candidates:
 
 def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     """The nearest useful place in each compass sector around the UAV, seen with ``camera``
-    from ``altitude`` (ties: the one whose view adds more cells)."""
+    from ``altitude`` (ties: the one whose view adds more cells). A view's new cells are
+    counted with the footprint translated from the grid's centre, as
+    :func:`~pirl.world.planning.useful_map` does: exact for the paper model; for the frustum
+    model occlusion by obstacles is not counted."""
     sx, sy, _ = view.cfg.size
     x0, y0, _ = view.position
     todo = view.coverable & (view.views == 0)
