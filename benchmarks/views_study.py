@@ -1,9 +1,12 @@
 """Train choosers of candidate views (macro actions) and judge them beside the planner.
 
-A chooser (:mod:`pirl.agents.views`) picks one of eight candidate places to look from next;
+A chooser (:mod:`pirl.env.views`) picks one of eight candidate places to look from next;
 the grid's breadth-first moves fly it there. Each training seed trains sb3-contrib's
-MaskablePPO on :class:`~pirl.agents.views.ViewsEnv` over the quick profile's training env
-(15x15x3, its wind, no stall guard), one process per seed, two at a time. Judging plays every
+MaskablePPO on :class:`~pirl.env.views.ViewsEnv` over the quick profile's training env
+(15x15x3, its wind, no stall guard), one process per seed, two at a time, with the first
+prototype's PPO settings (8 envs, 256 steps, batch 256, net [128, 128]; ``--reward`` picks
+the weights). The method itself, ``pirl train --method ppo-views``, takes the profile's
+``ppo`` section and the static weights; judge its runs with ``judge_runs.py``. Judging plays every
 seed on validation scenarios (:func:`pirl.evaluate.scenarios.validation_seeds`, which no
 evaluation uses) of larger worlds and sites, acting greedy and stochastic, under the quick
 env (stall guard 32), beside the boustrophedon planner and the nearest-view rule
