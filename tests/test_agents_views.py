@@ -27,6 +27,7 @@ from pirl.env.views import (
     ViewsEnv,
     candidates,
     nearest_view,
+    view_gains,
 )
 from pirl.env.views_sb3 import ViewsVecEnv
 from pirl.evaluate import run_episode
@@ -214,3 +215,22 @@ def test_a_fleet_curriculum_is_refused_before_any_folder(tmp_path):
     with pytest.raises(ConfigError, match=r"train.uavs=\[1, 2\]: --method ppo-views chooses"):
         train("ppo-views", cfg, tmp_path / "run", show_progress=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_view_gains_count_as_the_footprint_cell_by_cell():
+    # A footprint filling its box is counted from a summed-area table, others cell by cell:
+    # both equal a direct count, at the grid's edges too.
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        sx, sy = (int(v) for v in rng.integers(1, 30, 2))
+        todo = rng.random((sx, sy)) < rng.random()
+        w, h = (int(v) for v in rng.integers(1, 10, 2))
+        ox, oy = (int(v) for v in rng.integers(-10, 5, 2))
+        box = np.array([(ox + i, oy + j) for i in range(w) for j in range(h)])
+        for offsets in (box, box[rng.random(len(box)) < 0.6]):
+            direct = np.array([
+                [sum(0 <= x + dx < sx and 0 <= y + dy < sy and todo[x + dx, y + dy]
+                     for dx, dy in offsets) for y in range(sy)]
+                for x in range(sx)
+            ])  # fmt: skip
+            assert np.array_equal(view_gains(todo, offsets), direct.reshape(sx, sy))

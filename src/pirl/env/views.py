@@ -86,6 +86,27 @@ def _moves_from(blocked, x0, y0, out):
                 tail += 1
 
 
+def view_gains(todo: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(X, Y) int64: how many ``todo`` cells the footprint ``offsets`` (rows (dx, dy)) sees
+    from each position. A footprint that fills its bounding box (the paper's square) is
+    counted from a summed-area table, exactly and in time independent of its size; any other
+    shape cell by cell."""
+    sx, sy = todo.shape
+    if not len(offsets):
+        return np.zeros((sx, sy), dtype=np.int64)
+    (x0, y0), (x1, y1) = offsets.min(axis=0), offsets.max(axis=0)
+    if len(np.unique(offsets, axis=0)) != (x1 - x0 + 1) * (y1 - y0 + 1):
+        out = np.zeros((sx, sy), dtype=np.int64)
+        _gains(todo, offsets, out)
+        return out
+    table = np.zeros((sx + 1, sy + 1), dtype=np.int64)
+    table[1:, 1:] = todo.astype(np.int64).cumsum(axis=0).cumsum(axis=1)
+    xs, ys = np.arange(sx), np.arange(sy)
+    lo_x, hi_x = np.clip(xs + x0, 0, sx), np.clip(xs + x1 + 1, 0, sx)
+    lo_y, hi_y = np.clip(ys + y0, 0, sy), np.clip(ys + y1 + 1, 0, sy)
+    return table[hi_x][:, hi_y] - table[lo_x][:, hi_y] - table[hi_x][:, lo_y] + table[lo_x][:, lo_y]
+
+
 @dataclass
 class Candidates:
     """One choice: up to K_VIEWS places (x, y, altitude) and the observation describing them."""
@@ -127,8 +148,7 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     todo = view.coverable & (view.views == 0)
     cx, cy = sx // 2, sy // 2
     offsets = view.footprint((cx, cy, altitude), camera) - np.array([cx, cy])
-    gains = np.zeros((sx, sy), dtype=np.int64)
-    _gains(todo, offsets, gains)
+    gains = view_gains(todo, offsets)
     moves = np.empty((sx, sy), dtype=np.int64)
     _moves_from(view.blocked[:, :, altitude], x0, y0, moves)
     xs, ys = np.nonzero((gains > 0) & (moves < UNREACHED) & (moves > 0))
