@@ -25,12 +25,12 @@ from typing import Any
 import numpy as np
 
 from pirl.agents.policy import Policy, hold_action
-from pirl.world import dynamics as D
 from pirl.world.planning import (
     MOVE_DELTAS,
     Cell,
     WorldView,
     bfs_path,
+    camera_action,
     largest_footprint_camera,
     nearest,
     useful_map,
@@ -39,18 +39,6 @@ from pirl.world.split import UNREACHABLE, cut_sweep, geodesic, owner_by_anchor
 from pirl.world.state import WorldBatch
 
 _MOVE_ACTION = {delta: action for action, delta in enumerate(MOVE_DELTAS)}
-
-
-def camera_action(current: tuple[int, int, int], target: tuple[int, int, int]) -> int | None:
-    """The camera action that brings (tilt, pan, zoom10) one step closer to ``target``."""
-    (tilt, pan, zoom10), (want_tilt, want_pan, want_zoom) = current, target
-    if tilt != want_tilt:
-        return D.TILT_PLUS if tilt < want_tilt else D.TILT_MINUS
-    if pan != want_pan:
-        return D.PAN_PLUS if pan < want_pan else D.PAN_MINUS
-    if zoom10 != want_zoom:
-        return D.ZOOM_PLUS if zoom10 < want_zoom else D.ZOOM_MINUS
-    return None
 
 
 def move_action(a: Cell, b: Cell) -> int:

@@ -34,7 +34,7 @@ class ViewsPolicy(Policy):
         self.world, self.e = world, index
         self.pilot = ViewPilot(world, index)
         self.limit = flight_limit(world.cfg)
-        self.choices, self.flown, self.choosing = 0, 0, True
+        self.flown, self.choosing = 0, True
 
     def act(self, obs: np.ndarray, info: dict[str, Any]) -> int:
         for _ in range(2):
@@ -44,7 +44,7 @@ class ViewsPolicy(Policy):
                 if not c.any:
                     break
                 self.pilot.aim(c.place(self.chooser(c)))
-                self.choices, self.flown, self.choosing = self.choices + 1, 0, False
+                self.flown, self.choosing = 0, False
             action = self.pilot.action() if self.flown < self.limit else None
             if action is not None:
                 self.flown += 1

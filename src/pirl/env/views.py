@@ -31,7 +31,13 @@ from pirl.config.world import VCPPConfig
 from pirl.env.core import EnvCore, require_one_uav
 from pirl.world import dynamics as D
 from pirl.world.metrics import episode_metrics
-from pirl.world.planning import Camera, Cell, WorldView, largest_footprint_camera
+from pirl.world.planning import (
+    Camera,
+    Cell,
+    WorldView,
+    camera_action,
+    largest_footprint_camera,
+)
 from pirl.world.state import WorldBatch
 
 K_VIEWS = 8
@@ -219,14 +225,9 @@ class ViewPilot:
     def action(self) -> int | None:
         """The next primitive action, or None once at the target with the camera set (or when
         no way leads there now)."""
-        tilt, pan, zoom10 = self.world.camera_setting(self.e)
-        want_tilt, want_pan, want_zoom = self.camera
-        if tilt != want_tilt:
-            return D.TILT_PLUS if tilt < want_tilt else D.TILT_MINUS
-        if pan != want_pan:
-            return D.PAN_PLUS if pan < want_pan else D.PAN_MINUS
-        if zoom10 != want_zoom:
-            return D.ZOOM_PLUS if zoom10 < want_zoom else D.ZOOM_MINUS
+        step = camera_action(self.world.camera_setting(self.e), self.camera)
+        if step is not None:
+            return step
         x, y, z = self.world.position(self.e)
         if z != self.altitude:
             return D.Z_PLUS if z < self.altitude else D.Z_MINUS

@@ -195,6 +195,18 @@ def _claim(blocked, sources, moves):
     return owner
 
 
+def camera_action(current: Camera, target: Camera) -> int | None:
+    """The camera action that brings (tilt, pan, zoom10) one step closer to ``target``."""
+    (tilt, pan, zoom10), (want_tilt, want_pan, want_zoom) = current, target
+    if tilt != want_tilt:
+        return D.TILT_PLUS if tilt < want_tilt else D.TILT_MINUS
+    if pan != want_pan:
+        return D.PAN_PLUS if pan < want_pan else D.PAN_MINUS
+    if zoom10 != want_zoom:
+        return D.ZOOM_PLUS if zoom10 < want_zoom else D.ZOOM_MINUS
+    return None
+
+
 def largest_footprint_camera(view: WorldView) -> tuple[Camera, int]:
     """Camera (tilt, pan 0, zoom10) and altitude whose footprint is largest.
 
