@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -152,3 +154,39 @@ def test_distribution_checks_off_change_no_number():
             MaskableCategorical(logits=torch.full((1, 3), float("nan"))).sample()
     finally:
         Distribution.set_default_validate_args(default)
+
+
+_ADAM_RUN = """
+import hashlib, sys, torch
+if sys.argv[1] == "configured":
+    from pirl._torch import configure
+    configure()
+torch.manual_seed(0)
+net = torch.nn.Sequential(torch.nn.Linear(10, 64), torch.nn.Tanh(), torch.nn.Linear(64, 3))
+opt = torch.optim.Adam(net.parameters(), lr=3e-4, eps=1e-5)
+for _ in range(40):
+    loss = net(torch.randn(32, 10)).pow(2).mean()
+    opt.zero_grad()
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(net.parameters(), 0.5)
+    opt.step()
+opt.load_state_dict(opt.state_dict())
+opt.step()  # the restored moments are used
+digest = hashlib.sha256(b"".join(p.detach().numpy().tobytes() for p in net.parameters()))
+print(digest.hexdigest(), "torch._dynamo" in sys.modules, torch.is_grad_enabled())
+"""
+
+
+def test_optimizer_without_compile_hooks_gives_the_same_weights():
+    """pirl._torch.configure() rebinds Adam's and Optimizer's torch.compile wrappers to the
+    functions they wrap: the same weights to the bit, and torch._dynamo is never imported
+    (each process starts fresh, since which modules a process imported is what is tested)."""
+    runs = {}
+    for how in ("stock", "configured"):
+        out = subprocess.run(
+            [sys.executable, "-c", _ADAM_RUN, how], capture_output=True, text=True, check=True
+        )
+        runs[how] = out.stdout.split()
+    assert runs["configured"][0] == runs["stock"][0]
+    assert runs["stock"][1:] == ["True", "True"]  # stock Adam imports torch._dynamo
+    assert runs["configured"][1:] == ["False", "True"]

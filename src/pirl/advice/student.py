@@ -39,6 +39,7 @@ import torch
 from torch import nn
 
 from pirl._atomic import replacing
+from pirl._torch import configure as configure_torch
 from pirl.advice.prompt import prompt_id
 from pirl.advice.recommendation import Recommendation
 from pirl.advice.teacher_dataset import TeacherDataset, default_dataset_path
@@ -253,6 +254,7 @@ class Student:
         self.score = StudentScore(0.0, 0.0, 0, {})
 
     def _initial_weights(self) -> None:
+        configure_torch()
         with torch.random.fork_rng():
             torch.manual_seed(self.seed)
             self.net = StudentNet(self.n_features, self.hidden)
