@@ -12,8 +12,9 @@ TEST_STAMP := $(VENV)/.installed-test
 
 # Installed by uv (from PyPI, in seconds) except torch, which pip takes from the machine's own
 # CPU wheel. Nothing is compiled to bytecode at install: Python writes each module's bytecode
-# when a process first imports it, so only what runs is compiled (an environment that sets
-# PYTHONDONTWRITEBYTECODE would compile on every import: it is unset for these commands).
+# when a process first imports it, so only what runs is compiled. An environment that sets
+# PYTHONDONTWRITEBYTECODE would compile every module, pirl's own included, in every process
+# that imports it: it is unset for these commands.
 UV := $(BIN)/uv pip install --quiet --python $(BIN)/python
 unexport PYTHONDONTWRITEBYTECODE
 
