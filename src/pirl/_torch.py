@@ -14,7 +14,7 @@ no number:
   ``torch._dynamo``, 1.2-2.3 CPU-s per process (PPO builds its Adam when a policy is built or
   loaded). PIRL never compiles, so :func:`configure` rebinds them to the functions they wrap
   (``step`` keeps its one effect outside compilation: gradients off while it runs). The
-  weights are the same to the bit (``tests/test_torch_setup.py``).
+  weights are the same to the bit (``tests/test_agents_policies.py``).
 """
 
 from __future__ import annotations
