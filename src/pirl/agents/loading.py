@@ -203,8 +203,8 @@ class TabNetPolicy(LearnedPolicy):
                 f"{model_path} cannot be loaded ({short_error(exc)}); {RETRAIN}"
             ) from None
         self.obs_size = int(getattr(self.model, "input_dim", 0) or 0) or None
-        # Inference only: set once (``Module.eval`` walks TabNet's ~120 modules; once per
-        # step it was a fifth of an IL evaluation's time).
+        # Inference only, set once: ``Module.eval`` walks TabNet's ~120 modules, and at every
+        # step it would cost a fifth of an IL evaluation.
         self.model.network.eval()
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
