@@ -71,6 +71,22 @@ def _gains(todo, offsets, out):
 
 
 @numba.njit(cache=True)
+def _box_gains(todo, x0, y0, x1, y1, out):
+    """out[x, y] = how many ``todo`` cells the box of offsets [x0, x1] x [y0, y1] sees from
+    (x, y), from a summed-area table: exact, and in time independent of the box's size."""
+    sx, sy = todo.shape
+    table = np.zeros((sx + 1, sy + 1), dtype=np.int64)
+    for x in range(sx):
+        for y in range(sy):
+            table[x + 1, y + 1] = todo[x, y] + table[x, y + 1] + table[x + 1, y] - table[x, y]
+    for x in range(sx):
+        lo_x, hi_x = min(max(x + x0, 0), sx), min(max(x + x1 + 1, 0), sx)
+        for y in range(sy):
+            lo_y, hi_y = min(max(y + y0, 0), sy), min(max(y + y1 + 1, 0), sy)
+            out[x, y] = table[hi_x, hi_y] - table[lo_x, hi_y] - table[hi_x, lo_y] + table[lo_x, lo_y]
+
+
+@numba.njit(cache=True)
 def _moves_from(blocked, x0, y0, out):
     """Breadth-first moves from (x0, y0) over the free cells of one altitude ``blocked``
     (X, Y); UNREACHED where no way leads."""
@@ -101,16 +117,60 @@ def view_gains(todo: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     if not len(offsets):
         return np.zeros((sx, sy), dtype=np.int64)
     (x0, y0), (x1, y1) = offsets.min(axis=0), offsets.max(axis=0)
-    if len(np.unique(offsets, axis=0)) != (x1 - x0 + 1) * (y1 - y0 + 1):
+    box = np.zeros((x1 - x0 + 1, y1 - y0 + 1), dtype=bool)
+    box[offsets[:, 0] - x0, offsets[:, 1] - y0] = True
+    if not box.all():
         out = np.zeros((sx, sy), dtype=np.int64)
         _gains(todo, offsets, out)
         return out
-    table = np.zeros((sx + 1, sy + 1), dtype=np.int64)
-    table[1:, 1:] = todo.astype(np.int64).cumsum(axis=0).cumsum(axis=1)
-    xs, ys = np.arange(sx), np.arange(sy)
-    lo_x, hi_x = np.clip(xs + x0, 0, sx), np.clip(xs + x1 + 1, 0, sx)
-    lo_y, hi_y = np.clip(ys + y0, 0, sy), np.clip(ys + y1 + 1, 0, sy)
-    return table[hi_x][:, hi_y] - table[lo_x][:, hi_y] - table[hi_x][:, lo_y] + table[lo_x][:, lo_y]
+    out = np.empty((sx, sy), dtype=np.int64)
+    _box_gains(todo, int(x0), int(y0), int(x1), int(y1), out)
+    return out
+
+
+_SECTOR_TABLES: dict[tuple[int, int], np.ndarray] = {}
+
+
+def sector_table(sx: int, sy: int) -> np.ndarray:
+    """(2 sx - 1, 2 sy - 1) int64: the compass sector (0 .. K_VIEWS - 1) of the offset
+    (dx, dy) at ``[dx + sx - 1, dy + sy - 1]``, made once per grid size. numpy's arctan2 on
+    flat integer offsets, so a cell on a sector's edge (a diagonal) falls on the same side
+    on every call."""
+    table = _SECTOR_TABLES.get((sx, sy))
+    if table is None:
+        dx = np.repeat(np.arange(-(sx - 1), sx, dtype=np.int64), 2 * sy - 1)
+        dy = np.tile(np.arange(-(sy - 1), sy, dtype=np.int64), 2 * sx - 1)
+        angle = (np.arctan2(dy, dx) + np.pi) / (2 * np.pi) * K_VIEWS
+        table = (angle.astype(int) % K_VIEWS).reshape(2 * sx - 1, 2 * sy - 1)
+        _SECTOR_TABLES[(sx, sy)] = table
+    return table
+
+
+@numba.njit(cache=True)
+def _survey(todo, coverable, gains, moves, x0, y0, sectors, best, work, blocks):
+    """One pass over the grid from the UAV at (x0, y0): per sector the nearest place whose
+    view adds cells (``best`` rows x, y, moves, new cells; x = -1 where none; ties: more new
+    cells, then the first in row-major order), the uncovered cells per sector (``work``), and
+    per COARSE x COARSE block its coverable and uncovered cells (``blocks``)."""
+    sx, sy = todo.shape
+    ox, oy = sx - 1 - x0, sy - 1 - y0
+    bx, by = -(-sx // COARSE), -(-sy // COARSE)
+    best[:, :] = -1
+    work[:] = 0
+    blocks[:, :] = 0
+    for x in range(sx):
+        for y in range(sy):
+            s = sectors[x + ox, y + oy]
+            b = (x // bx) * COARSE + y // by
+            if coverable[x, y]:
+                blocks[b, 0] += 1
+            if todo[x, y]:
+                work[s] += 1
+                blocks[b, 1] += 1
+            g, d = gains[x, y], moves[x, y]
+            if g > 0 and 0 < d < UNREACHED:
+                if best[s, 0] < 0 or d < best[s, 2] or (d == best[s, 2] and g > best[s, 3]):
+                    best[s, 0], best[s, 1], best[s, 2], best[s, 3] = x, y, d, g
 
 
 @dataclass
@@ -157,47 +217,40 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     gains = view_gains(todo, offsets)
     moves = np.empty((sx, sy), dtype=np.int64)
     _moves_from(view.blocked[:, :, altitude], x0, y0, moves)
-    xs, ys = np.nonzero((gains > 0) & (moves < UNREACHED) & (moves > 0))
+    best = np.empty((K_VIEWS, 4), dtype=np.int64)
+    work = np.empty(K_VIEWS, dtype=np.int64)
+    blocks = np.empty((COARSE * COARSE, 2), dtype=np.int64)
+    _survey(todo, view.coverable, gains, moves, x0, y0, sector_table(sx, sy), best, work, blocks)
     # Distances in footprint widths, squashed: the same numbers on a 15x15 training world
     # and on a 256x256 site, so what the chooser learned near by carries to any size.
     scale = 4.0 * max(1.0, float(np.sqrt(len(offsets))))
-    left = max(1, int(todo.sum()))
+    n_todo = int(blocks[:, 1].sum())
+    left = max(1, n_todo)
     obs = np.zeros(OBS_SIZE, dtype=np.float32)
     cells: list[Cell | None] = [None] * K_VIEWS
     far, new = [0] * K_VIEWS, [0] * K_VIEWS
-    if len(xs):
-        dx, dy = xs - x0, ys - y0
-        sector = ((np.arctan2(dy, dx) + np.pi) / (2 * np.pi) * K_VIEWS).astype(int) % K_VIEWS
-        tx, ty = np.nonzero(todo)
-        t_sector = ((np.arctan2(ty - y0, tx - x0) + np.pi) / (2 * np.pi) * K_VIEWS).astype(int)
-        work = np.bincount(t_sector % K_VIEWS, minlength=K_VIEWS)
-        dist, gain = moves[xs, ys], gains[xs, ys]
-        order = np.lexsort((-gain, dist, sector))  # per sector: nearest, then larger view
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = sector[order][1:] != sector[order][:-1]
-        fp = max(1, len(offsets))
-        for i in order[first]:
-            k = int(sector[i])
-            cells[k] = (int(xs[i]), int(ys[i]), int(altitude))
-            far[k], new[k] = int(dist[i]), int(gain[i])
-            obs[k * VIEW_FEATURES : (k + 1) * VIEW_FEATURES] = (
-                1.0, np.tanh(dx[i] / scale), np.tanh(dy[i] / scale), np.tanh(dist[i] / scale),
-                gain[i] / fp,
-                work[k] / left,
-            )  # fmt: skip
-    coverable, n_todo = max(1, int(view.coverable.sum())), int(todo.sum())
+    fp = max(1, len(offsets))
+    for k in range(K_VIEWS):
+        x, y, dist, gain = best[k]
+        if x < 0:
+            continue
+        dx, dy = x - x0, y - y0
+        cells[k] = (int(x), int(y), int(altitude))
+        far[k], new[k] = int(dist), int(gain)
+        obs[k * VIEW_FEATURES : (k + 1) * VIEW_FEATURES] = (
+            1.0, np.tanh(dx / scale), np.tanh(dy / scale), np.tanh(dist / scale),
+            gain / fp,
+            work[k] / left,
+        )  # fmt: skip
+    coverable = max(1, int(blocks[:, 0].sum()))
     g = K_VIEWS * VIEW_FEATURES
     obs[g : g + 6] = (
         x0 / max(1, sx - 1), y0 / max(1, sy - 1), view.energy / view.cfg.capacity,
         1.0 - n_todo / coverable, n_todo / (sx * sy), altitude / max(1, view.cfg.size[2] - 1),
     )  # fmt: skip
-    bx, by = -(-sx // COARSE), -(-sy // COARSE)
-    for i in range(COARSE):
-        for j in range(COARSE):
-            block = view.coverable[i * bx : (i + 1) * bx, j * by : (j + 1) * by]
-            if block.any():
-                done = todo[i * bx : (i + 1) * bx, j * by : (j + 1) * by].sum()
-                obs[g + 6 + i * COARSE + j] = done / block.sum()
+    for b, (in_block, done) in enumerate(blocks):
+        if in_block:
+            obs[g + 6 + b] = done / in_block
     return Candidates(cells, obs, far, new)
 
 
