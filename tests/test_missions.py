@@ -285,7 +285,7 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
     # The evaluation's records name the better run on the site: it is the one flown.
     records = [
         {"train_seed": k, "act": "stochastic", "site": "block", "sim": "grid",
-         "source": str(run), "vcr": vcr}
+         "source": str(run), "vcr": vcr, "steps": 100}
         for k, (run, vcr) in enumerate(zip(runs, (0.4, 0.6), strict=True))
     ]  # fmt: skip
     # Two workers, as the demo flies them: each mission in a process of its own.
@@ -315,6 +315,26 @@ def test_a_reproduction_writes_and_flies_the_planner_and_the_best_learned_missio
 
 
 # -- a fleet's missions ------------------------------------------------------------------------
+def test_the_best_learned_run_is_the_one_of_most_coverage_then_fewest_steps() -> None:
+    from pirl.report.missions import best_run
+
+    def episode(source: str, vcr: float, steps: int, **kw) -> dict:
+        return {"train_seed": 0, "act": "stochastic", "site": "campus", "sim": "grid",
+                "source": source, "vcr": vcr, "steps": steps, **kw}  # fmt: skip
+
+    records = [
+        episode("a", 1.0, 400), episode("a", 1.0, 420),  # the same coverage as b, longer
+        episode("b", 1.0, 300), episode("b", 1.0, 310),
+        episode("c", 0.98, 200), episode("c", 0.98, 200),  # shorter, but covers less
+        episode("d", 1.0, 100, act="greedy"),  # another act mode
+        episode("e", 1.0, 100, site="town"),  # another site
+        episode("f", 1.0, 100, sim="physics"),  # not the grid's episode
+    ]
+    assert best_run(records, "campus", "stochastic") == (Path("b"), 1.0)
+    assert best_run(records, "campus", "greedy") == (Path("d"), 1.0)
+    assert best_run(records, "village", "stochastic") is None
+
+
 def test_a_fleet_writes_one_mission_per_uav_kept_apart_in_time(tmp_path: Path) -> None:
     """``pirl plan --uavs 3``: uav-1/ .. uav-3/ each a full mission that pymavlink reads back,
     homes at distinct start cells, and fleet.json's separation holds when every UAV's track is
