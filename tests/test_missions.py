@@ -323,9 +323,12 @@ def test_the_best_learned_run_is_the_one_of_most_coverage_then_fewest_steps() ->
                 "source": source, "vcr": vcr, "steps": steps, **kw}  # fmt: skip
 
     records = [
-        episode("a", 1.0, 400), episode("a", 1.0, 420),  # the same coverage as b, longer
-        episode("b", 1.0, 300), episode("b", 1.0, 310),
-        episode("c", 0.98, 200), episode("c", 0.98, 200),  # shorter, but covers less
+        episode("a", 1.0, 400),
+        episode("a", 1.0, 420),  # the same coverage as b, longer
+        episode("b", 1.0, 300),
+        episode("b", 1.0, 310),
+        episode("c", 0.98, 200),
+        episode("c", 0.98, 200),  # shorter, but covers less
         episode("d", 1.0, 100, act="greedy"),  # another act mode
         episode("e", 1.0, 100, site="town"),  # another site
         episode("f", 1.0, 100, sim="physics"),  # not the grid's episode

@@ -83,7 +83,8 @@ def _box_gains(todo, x0, y0, x1, y1, out):
         lo_x, hi_x = min(max(x + x0, 0), sx), min(max(x + x1 + 1, 0), sx)
         for y in range(sy):
             lo_y, hi_y = min(max(y + y0, 0), sy), min(max(y + y1 + 1, 0), sy)
-            out[x, y] = table[hi_x, hi_y] - table[lo_x, hi_y] - table[hi_x, lo_y] + table[lo_x, lo_y]
+            inside = table[hi_x, hi_y] - table[lo_x, hi_y]
+            out[x, y] = inside - table[hi_x, lo_y] + table[lo_x, lo_y]
 
 
 @numba.njit(cache=True)
@@ -168,9 +169,10 @@ def _survey(todo, coverable, gains, moves, x0, y0, sectors, best, work, blocks):
                 work[s] += 1
                 blocks[b, 1] += 1
             g, d = gains[x, y], moves[x, y]
-            if g > 0 and 0 < d < UNREACHED:
-                if best[s, 0] < 0 or d < best[s, 2] or (d == best[s, 2] and g > best[s, 3]):
-                    best[s, 0], best[s, 1], best[s, 2], best[s, 3] = x, y, d, g
+            if not (g > 0 and 0 < d < UNREACHED):
+                continue
+            if best[s, 0] < 0 or d < best[s, 2] or (d == best[s, 2] and g > best[s, 3]):
+                best[s, 0], best[s, 1], best[s, 2], best[s, 3] = x, y, d, g
 
 
 @dataclass
