@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import textwrap
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
@@ -186,7 +187,7 @@ def figure(rows: list[tuple[str, str, list[dict[str, Any]]]], path: Path) -> Pat
         fig.suptitle(
             "Missions flown from their files (green: ground seen in flight; red: waypoints)"
         )
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0, 1, 0.95))  # the panels' titles below the figure's
         path.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path)
         plt.close(fig)
@@ -211,9 +212,10 @@ def _panels(axes: Any, rows: list[tuple[str, str, list[dict[str, Any]]]]) -> Non
             xy = np.array([(c[0], c[1]) for c in cells if c is not None])
             if len(xy):
                 ax.plot(xy[:, 0], xy[:, 1], color="tab:red", lw=0.8)
-            method = e["summary"]["method"]
+            # Wrapped, not cut: a learned mission's title names its run and act mode.
+            what = textwrap.wrap(f"{name}: {e['summary']['method']}", 44)
             ax.set_title(
-                f"{name}: {method[:38]}\nflown VCR {e['flown']['vcr']:.3f} "
+                "\n".join(what) + f"\nflown VCR {e['flown']['vcr']:.3f} "
                 f"(grid {e['summary']['vcr']:.3f})",
             )
             ax.set_xticks([])
