@@ -442,7 +442,8 @@ def _run_job(
 # second are per advisor: its entry in pirl.advice.registry holds them.
 RATES: dict[str, Any] = {
     "ppo_steps_per_s": 5000.0,
-    "views_choices_per_s": 1700.0,  # ppo-views: a choice flies several steps, offers 8 places
+    "views_choices_per_s": 2000.0,  # ppo-views (a choice flies several steps, offers 8
+    # places): 262,144 choices in 113-121 s in the demo's 2 workers
     "il_s": 60.0,
     "eval_eps_per_s": {30: 3.0},
     "physics_s_per_episode": 30.0,
