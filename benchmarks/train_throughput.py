@@ -28,6 +28,7 @@ import time
 import numpy as np
 import torch
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecMonitor
 
 from pirl.advice.factory import make_advisor
@@ -83,7 +84,9 @@ def timed_learn(model: PPO, steps: int) -> dict[str, float]:
 
 
 def _ppo(env, cfg: RunConfig) -> PPO:
-    return build_ppo(env, cfg, seed=0, tb_dir=None)
+    model = build_ppo(env, cfg, seed=0, tb_dir=None)
+    model.set_logger(Logger(None, []))  # SB3's default would make a folder in the temp dir
+    return model
 
 
 def run_case(name: str, env, cfg: RunConfig, steps: int, pare=None) -> dict[str, float]:

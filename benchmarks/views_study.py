@@ -49,6 +49,7 @@ def train(seed: int, choices: int, reward: str, out: Path) -> str:
     """One chooser, trained on ``choices`` choices; saved as ``out/s{seed}.zip``."""
     import torch
     from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     from pirl.agents.train import training_env
@@ -65,6 +66,7 @@ def train(seed: int, choices: int, reward: str, out: Path) -> str:
         gamma=0.99, gae_lambda=0.95, ent_coef=0.01, policy_kwargs={"net_arch": [128, 128]},
         seed=seed, device="cpu", verbose=0,
     )  # fmt: skip
+    model.set_logger(Logger(None, []))  # SB3's default would make a folder in the temp dir
     started = time.process_time()
     model.learn(choices)
     partial = out / f".s{seed}.part.zip"
