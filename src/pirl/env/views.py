@@ -148,16 +148,17 @@ def sector_table(sx: int, sy: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _survey(todo, coverable, gains, moves, x0, y0, sectors, best, work, blocks):
-    """One pass over the grid from the UAV at (x0, y0): per sector the nearest place whose
-    view adds cells (``best`` rows x, y, moves, new cells; x = -1 where none; ties: more new
-    cells, then the first in row-major order), the uncovered cells per sector (``work``), and
-    per COARSE x COARSE block its coverable and uncovered cells (``blocks``)."""
+def _survey(todo, coverable, gains, moves, at, sectors, best, blocks):
+    """One pass over the grid from the UAV at ``at`` = (x0, y0): per sector k, ``best[k]`` =
+    x, y, moves and new cells of the nearest place whose view adds cells (x = -1 where none;
+    ties: more new cells, then the first in row-major order), and the sector's uncovered
+    cells; per COARSE x COARSE block its coverable and uncovered cells (``blocks``)."""
     sx, sy = todo.shape
+    x0, y0 = at
     ox, oy = sx - 1 - x0, sy - 1 - y0
     bx, by = -(-sx // COARSE), -(-sy // COARSE)
-    best[:, :] = -1
-    work[:] = 0
+    best[:, :4] = -1
+    best[:, 4] = 0
     blocks[:, :] = 0
     for x in range(sx):
         for y in range(sy):
@@ -166,7 +167,7 @@ def _survey(todo, coverable, gains, moves, x0, y0, sectors, best, work, blocks):
             if coverable[x, y]:
                 blocks[b, 0] += 1
             if todo[x, y]:
-                work[s] += 1
+                best[s, 4] += 1
                 blocks[b, 1] += 1
             g, d = gains[x, y], moves[x, y]
             if not (g > 0 and 0 < d < UNREACHED):
@@ -219,10 +220,9 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     gains = view_gains(todo, offsets)
     moves = np.empty((sx, sy), dtype=np.int64)
     _moves_from(view.blocked[:, :, altitude], x0, y0, moves)
-    best = np.empty((K_VIEWS, 4), dtype=np.int64)
-    work = np.empty(K_VIEWS, dtype=np.int64)
+    best = np.empty((K_VIEWS, 5), dtype=np.int64)
     blocks = np.empty((COARSE * COARSE, 2), dtype=np.int64)
-    _survey(todo, view.coverable, gains, moves, x0, y0, sector_table(sx, sy), best, work, blocks)
+    _survey(todo, view.coverable, gains, moves, (x0, y0), sector_table(sx, sy), best, blocks)
     # Distances in footprint widths, squashed: the same numbers on a 15x15 training world
     # and on a 256x256 site, so what the chooser learned near by carries to any size.
     scale = 4.0 * max(1.0, float(np.sqrt(len(offsets))))
@@ -233,7 +233,7 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
     far, new = [0] * K_VIEWS, [0] * K_VIEWS
     fp = max(1, len(offsets))
     for k in range(K_VIEWS):
-        x, y, dist, gain = best[k]
+        x, y, dist, gain, work = best[k]
         if x < 0:
             continue
         dx, dy = x - x0, y - y0
@@ -242,7 +242,7 @@ def candidates(view: WorldView, camera: Camera, altitude: int) -> Candidates:
         obs[k * VIEW_FEATURES : (k + 1) * VIEW_FEATURES] = (
             1.0, np.tanh(dx / scale), np.tanh(dy / scale), np.tanh(dist / scale),
             gain / fp,
-            work[k] / left,
+            work / left,
         )  # fmt: skip
     coverable = max(1, int(blocks[:, 0].sum()))
     g = K_VIEWS * VIEW_FEATURES
