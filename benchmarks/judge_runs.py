@@ -41,6 +41,9 @@ def main() -> None:
     parser.add_argument("--sizes", nargs="*", default=["30", "45", "60"])
     parser.add_argument("--sites", nargs="*", default=[])
     parser.add_argument("--episodes", type=int, default=6, help="scenarios per world")
+    parser.add_argument("--guard", type=int, default=None,
+                        help="play every world under this stall guard (0: off), whatever "
+                             "the runs trained with")  # fmt: skip
     args = parser.parse_args()
     groups = {}
     for text in args.group:
@@ -51,7 +54,7 @@ def main() -> None:
     for name, runs in groups.items():
         env = RunConfig.from_dict(yaml.safe_load((runs[0] / "config.yaml").read_text())).env
         env = env.replace(start_camera="fixed")
-        for world, cfg, grid in worlds_of(env, sizes, [], args.sites):
+        for world, cfg, grid in worlds_of(env, sizes, [], args.sites, guard=args.guard):
             seeds = validation_seeds(grid, args.episodes)
             planned = planner_metrics(cfg, seeds)  # one planner episode per scenario
             p_steps = [m["steps"] for m in planned]
