@@ -200,3 +200,15 @@ def test_the_executor_follows_the_workers_and_the_ray_address(tmp_path):
     assert executor_for(_plan(tmp_path, workers=2), "local") == ExecutorChoice(
         "ray", ray_address="local"
     )
+
+
+def test_the_plan_counts_a_choosers_budget_in_choices():
+    from pirl.reproduce.plan import steps_text
+
+    quick = RunConfig.from_yaml(ROOT / "configs" / "quick.yaml")
+    assert steps_text(quick) == (
+        "262,144 steps (PPO-EWRI 409,600, PIRL 409,600, PPO-views 262,144 choices)"
+    )
+    views = quick.with_overrides(reproduce={"methods": ["ppo-sr", "ppo-views"]},
+                                 train={"steps_by_method": {"ppo-views": 1024}})  # fmt: skip
+    assert steps_text(views) == "262,144 steps (PPO-views 1,024 choices)"

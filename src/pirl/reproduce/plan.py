@@ -145,11 +145,16 @@ def default_workers() -> int:
 
 def steps_text(cfg: RunConfig) -> str:
     """The training budget in words: '409,600 steps', or with each method's own budget
-    ('409,600 steps (PPO-EWRI 1,638,400)') when ``train.steps_by_method`` names one."""
+    ('409,600 steps (PPO-EWRI 1,638,400)') when ``train.steps_by_method`` names one; a
+    chooser of candidate views counts choices ('PPO-views 262,144 choices')."""
+    views = [m for m in cfg.reproduce.methods if trained_method(m).views]
     own = [
         f"{label(name)} {steps:,}"
         for name, steps in cfg.train.steps_by_method.items()
-        if steps != cfg.train.total_steps
+        if steps != cfg.train.total_steps and name not in views
+    ]
+    own += [
+        f"{trained_method(n).short or label(n)} {method_steps(cfg, n):,} choices" for n in views
     ]
     return f"{cfg.train.total_steps:,} steps" + (f" ({', '.join(own)})" if own else "")
 
