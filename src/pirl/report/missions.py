@@ -43,13 +43,13 @@ def best_run(records: list[dict[str, Any]], site: str, act: str) -> tuple[Path, 
         trained = r.get("train_seed") is not None and r.get("act") == act
         if trained and r.get("site") == site and r.get("sim") == "grid":
             by_run[str(r["source"])].append((float(r["vcr"]), int(r["steps"])))
+    if not by_run:
+        return None
 
     def merit(source: str) -> tuple[float, float]:
         vcr, steps = np.mean(by_run[source], axis=0)
         return float(vcr), -float(steps)
 
-    if not by_run:
-        return None
     source = max(sorted(by_run), key=merit)
     return Path(source), merit(source)[0]
 
